@@ -1,0 +1,101 @@
+"""Planning settings: criterion, uncertainty, action costs and goal (spec sections 5 to 7)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, get_args
+
+from planner.actions import Action
+from planner.errors import GoalError, PlannerError
+
+Criterion = Literal["robust", "optimistic"]
+Uncertainty = Literal["lateral", "none"]
+Model = Literal["paper"]
+
+DEFAULT_CALM_SPEED_M_S = 0.01  # spec section 3
+
+
+def check_choice(name: str, value: str, choices: object) -> str:
+    """Return ``value`` if it is one of the Literal's options, else raise naming the key."""
+    options = get_args(choices)
+    if value not in options:
+        raise PlannerError(f"{name}: expected one of {', '.join(options)}; got {value!r}")
+    return value
+
+
+@dataclass(frozen=True, kw_only=True)
+class Costs:
+    """Cost of each action (spec section 5: the paper's drift 0, glide 2, forward 4, rotate 10)."""
+
+    drift: int = 0
+    forward: int = 4
+    rotate: int = 10
+    glide: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("drift", "forward", "rotate", "glide"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise PlannerError(f"costs.{name}: expected a non-negative integer; got {value!r}")
+            if value != int(value) or value < 0:
+                raise PlannerError(
+                    f"costs.{name}: the paper model needs non-negative integer costs (spec section 7); got {value!r}"
+                )
+            object.__setattr__(self, name, int(value))
+        if self.max_cost > 1_000_000:
+            raise PlannerError(f"costs: expected costs up to 1000000; got {self.max_cost}")
+
+    def of(self, action: Action) -> int:
+        """Cost of a move action."""
+        return {
+            Action.DRIFT: self.drift,
+            Action.FORWARD: self.forward,
+            Action.ROTATE_LEFT: self.rotate,
+            Action.ROTATE_RIGHT: self.rotate,
+            Action.UP: self.glide,
+            Action.DOWN: self.glide,
+        }[Action(action)]
+
+    def as_list(self) -> list[int]:
+        """Costs indexed by action code 0..5."""
+        return [self.of(a) for a in range(6)]
+
+    @property
+    def max_cost(self) -> int:
+        return max(self.drift, self.forward, self.rotate, self.glide)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Goal:
+    """The goal point and radius (spec section 6)."""
+
+    lon_deg: float
+    lat_deg: float
+    depth_m: float
+    radius_cells: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("lon_deg", "lat_deg", "depth_m"):
+            if not math.isfinite(float(getattr(self, name))):
+                raise GoalError(f"goal.{name}: expected a finite number; got {getattr(self, name)!r}")
+        if int(self.radius_cells) != self.radius_cells or self.radius_cells < 0:
+            raise GoalError(f"goal_radius: expected a non-negative whole number of cells; got {self.radius_cells!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlanSettings:
+    """How to plan: model, criterion, uncertainty, costs and the calm threshold."""
+
+    model: Model = "paper"
+    criterion: Criterion = "robust"
+    uncertainty: Uncertainty = "lateral"
+    costs: Costs = field(default_factory=Costs)
+    calm_speed_m_s: float = DEFAULT_CALM_SPEED_M_S
+
+    def __post_init__(self) -> None:
+        check_choice("model", self.model, Model)
+        check_choice("criterion", self.criterion, Criterion)
+        check_choice("uncertainty", self.uncertainty, Uncertainty)
+        if not (math.isfinite(self.calm_speed_m_s) and self.calm_speed_m_s >= 0):
+            raise PlannerError(f"calm_speed: expected a non-negative speed in m/s; got {self.calm_speed_m_s!r}")
