@@ -88,6 +88,43 @@ class Solution:
         return (float(p >> STEPS_BITS), p & STEPS_MASK)
 
 
+@dataclass(frozen=True, kw_only=True)
+class PathStep:
+    """One state along a nominal path and the action the policy takes there."""
+
+    l: int
+    j: int
+    i: int
+    k: int
+    action: Action
+
+
+def nominal_path(solution: Solution, start: tuple[int, int, int, int], *, max_steps: int = 100_000) -> list[PathStep]:
+    """Follow the policy from ``start`` (``(l, j, i, k)``) taking each action's nominal outcome.
+
+    The nominal outcome is the move along the action's own direction (spec
+    section 5, without the lateral deviations). The last step carries AT_GOAL
+    or UNREACHABLE. Under ``robust`` the value falls along every outcome, so the
+    path ends at the goal; under ``optimistic`` it may not, and then it stops
+    where the value stops falling.
+    """
+    model = solution.model
+    out = np.empty(3, dtype=np.int64)
+    path: list[PathStep] = []
+    state = tuple(int(x) for x in start)
+    for _ in range(max_steps):
+        a = Action(int(solution.action[state]))
+        path.append(PathStep(l=state[0], j=state[1], i=state[2], k=state[3], action=a))
+        if a in (Action.AT_GOAL, Action.UNREACHABLE):
+            break
+        outcomes_of(model.flow_dir, model.reach, model.lateral, *state, int(a), out)
+        nxt = model.state_of(int(out[0]))
+        if solution.packed_value[nxt] >= solution.packed_value[state]:
+            break  # optimistic plans promise only the best outcome
+        state = nxt
+    return path
+
+
 def locate_goal(model: TransitionModel, goal: Goal) -> GoalCells:
     """Goal cell, layer and goal-cell mask, or a GoalError that says why not (spec section 6)."""
     grid = model.grid
@@ -147,52 +184,35 @@ def solve(model: TransitionModel, goal: Goal, *, progress: bool = False) -> Solu
     packed = np.full(n_states, UNREACHED, dtype=np.int64)
     action = np.full(n_states, Action.UNREACHABLE, dtype=np.uint8)
     settled = np.zeros(n_states, dtype=np.uint8)
-    goal_states = (np.flatnonzero(goal_cells.mask.ravel())[:, None] * N_HEADINGS + np.arange(N_HEADINGS)).ravel()
+    slab = grid.n_layers * grid.ny * grid.nx  # internal states are heading-major (transitions.state_index)
+    goal_states = (np.arange(N_HEADINGS)[:, None] * slab + np.flatnonzero(goal_cells.mask.ravel())[None, :]).ravel()
     packed[goal_states] = 0
     action[goal_states] = Action.AT_GOAL
     n_water = int(model.water.sum()) * N_HEADINGS
-    queue = _new_queue(goal_states, int(model.costs.max()) + 1)
+    queue = _BucketQueue.start(goal_states, n_buckets=int(model.costs.max()) + 1)
     budget = max(n_water // 20, 200_000) if progress else n_states + 1
-    done = 0
     t1 = time.perf_counter()
     while True:
-        queue, n = _dijkstra(
+        status = _search(
             grid.n_layers, grid.ny, grid.nx, mask_h, mask_v, remaining, model.costs, robust,
-            packed, action, settled, queue, budget,
+            packed, action, settled, *queue.arrays(), budget,
         )
-        done += n
-        if progress:
-            print(f"  solving: {done / n_water:6.1%} of water states settled", file=sys.stderr, flush=True)
-        if queue[-1][0] == 0:  # no entries left
+        if status == _DONE:
             break
+        if status == _BUDGET and progress:
+            done = int(queue.ctr[_SETTLED])
+            print(f"  solving: {done / n_water:6.1%} of water states settled", file=sys.stderr, flush=True)
+        queue.grow(status)
     if progress:
         print(f"  search: {time.perf_counter() - t1:.2f} s", file=sys.stderr, flush=True)
-    shape = grid.shape
+    internal = (N_HEADINGS, grid.n_layers, grid.ny, grid.nx)
     return Solution(
         model=model,
         goal=goal,
         goal_cells=goal_cells,
-        packed_value=packed.reshape(shape),
-        action=action.reshape(shape),
+        packed_value=np.moveaxis(packed.reshape(internal), 0, -1),  # views indexed [l, j, i, k]
+        action=np.moveaxis(action.reshape(internal), 0, -1),
     )
-
-
-def _new_queue(goal_states: NDArray[np.int64], n_buckets: int) -> tuple:
-    cap = max(1024, 2 * goal_states.size)
-    pool_state = np.empty(cap, dtype=np.int64)
-    pool_key = np.empty(cap, dtype=np.int64)
-    pool_next = np.empty(cap, dtype=np.int64)
-    head = np.full(n_buckets, -1, dtype=np.int64)
-    n = goal_states.size
-    pool_state[:n] = goal_states
-    pool_key[:n] = 0
-    pool_next[:n] = np.arange(1, n + 1)
-    if n:
-        pool_next[n - 1] = -1
-        head[0] = 0
-    # counters: live entries, used slots, free-list head, current cost
-    counters = np.array([n, n, -1, 0], dtype=np.int64)
-    return (pool_state, pool_key, pool_next, head, counters)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -214,7 +234,7 @@ def _build_predecessors(flow_dir, reach, lateral, robust, mask_h, mask_v, remain
                 for i in range(nx):
                     if flow_dir[l, j, i] == -2:
                         continue
-                    s = ((l * ny + j) * nx + i) * 8 + k
+                    s = ((k * L + l) * ny + j) * nx + i
                     for ai in range(4):
                         a = _MOVE_CODES[ai]
                         n = outcomes_of(flow_dir, reach, lateral, l, j, i, k, a, out)
@@ -224,9 +244,8 @@ def _build_predecessors(flow_dir, reach, lateral, robust, mask_h, mask_v, remain
                             t = out[q]
                             if t == s:
                                 continue
-                            tc = t // 8
-                            ti = tc % nx
-                            tj = (tc // nx) % ny
+                            ti = t % nx
+                            tj = (t // nx) % ny
                             disp = _DISP_INDEX_NB[tj - j + 2, ti - i + 2]
                             if a == 0:
                                 mask_h[t] |= one << np.uint64(disp - 1)
@@ -238,99 +257,170 @@ def _build_predecessors(flow_dir, reach, lateral, robust, mask_h, mask_v, remain
                                 mask_v[t] |= one << np.uint64(disp + 17)
 
 
+# Status codes of ``_search`` and the slots of the queue's counter array.
+_DONE, _BUDGET, _POOL_FULL, _FIFO_FULL, _BUCKET_TOO_BIG = 0, 1, 2, 3, 4
+_LIVE, _USED, _FREE, _NFREE, _COST, _P, _M, _FHEAD, _FTAIL, _IN_BUCKET, _SETTLED, _NEED = range(12)
+_ROOM = 40  # queue slots one settled state may need: 2 rotations + 34 mask bits
+
+
+@dataclass(eq=False)
+class _BucketQueue:
+    """Dial's bucket queue over cost as linked lists in one pool, plus the open bucket.
+
+    The arrays are grown here, between calls of ``_search``, never inside it:
+    rebinding arrays inside a numba loop costs a reference count per access.
+    """
+
+    pool_state: NDArray[np.int64]
+    pool_key: NDArray[np.int64]
+    pool_next: NDArray[np.int64]
+    head: NDArray[np.int64]
+    cand_state: NDArray[np.int64]
+    cand_key: NDArray[np.int64]
+    fifo_state: NDArray[np.int64]
+    fifo_key: NDArray[np.int64]
+    ctr: NDArray[np.int64]
+
+    @classmethod
+    def start(cls, goal_states: NDArray[np.int64], *, n_buckets: int) -> _BucketQueue:
+        n = goal_states.size
+        cap = max(4096, 2 * n)
+        pool_next = np.full(cap, -1, dtype=np.int64)
+        pool_next[: n - 1] = np.arange(1, n)
+        head = np.full(n_buckets, -1, dtype=np.int64)
+        head[0] = 0 if n else -1
+        pool_state = np.zeros(cap, dtype=np.int64)
+        pool_state[:n] = goal_states
+        ctr = np.zeros(12, dtype=np.int64)
+        ctr[_LIVE], ctr[_USED], ctr[_FREE] = n, n, -1
+        empty = np.zeros(4096, dtype=np.int64)
+        return cls(pool_state, np.zeros(cap, dtype=np.int64), pool_next, head,
+                   empty.copy(), empty.copy(), empty.copy(), empty.copy(), ctr)
+
+    def arrays(self) -> tuple[NDArray[np.int64], ...]:
+        return (self.pool_state, self.pool_key, self.pool_next, self.head, self.cand_state,
+                self.cand_key, self.fifo_state, self.fifo_key, self.ctr)
+
+    def grow(self, status: int) -> None:
+        if status == _POOL_FULL:
+            self.pool_state, self.pool_key, self.pool_next = (
+                np.concatenate([a, np.zeros_like(a)]) for a in (self.pool_state, self.pool_key, self.pool_next)
+            )
+        elif status == _FIFO_FULL:
+            self.fifo_state, self.fifo_key = (np.concatenate([a, np.zeros_like(a)]) for a in (self.fifo_state, self.fifo_key))
+        elif status == _BUCKET_TOO_BIG:
+            size = int(self.ctr[_NEED])
+            self.cand_state, self.cand_key = np.zeros(2 * size, np.int64), np.zeros(2 * size, np.int64)
+
+
 @numba.njit(cache=True, nogil=True)
-def _dijkstra(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action, settled, queue, budget):  # pragma: no cover
-    """Settle states bucket by bucket until ``budget`` states are settled or the queue is empty."""
-    pool_state, pool_key, pool_next, head, counters = queue
-    live, used, free, c = counters[0], counters[1], counters[2], counters[3]
+def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action, settled,  # pragma: no cover
+            pool_state, pool_key, pool_next, head, cand_state, cand_key, fifo_state, fifo_key, ctr, budget):
+    """Settle states in value order until done, ``budget`` more are settled, or a buffer is full.
+
+    Inside the open bucket (cost ``c``), states are taken in order of steps from
+    two sorted sources: ``cand`` (queued from earlier buckets, sorted on opening)
+    and the FIFO of zero-cost moves made in this bucket.
+    """
     n_buckets = head.size
-    n_settled = 0
-    fifo_state = np.empty(1024, dtype=np.int64)
-    fifo_key = np.empty(1024, dtype=np.int64)
+    slab = L * ny * nx
     one = np.uint64(1)
-    while live > 0 and n_settled < budget:
-        b = c % n_buckets
-        # Gather this bucket's entries (all have cost c) and free their nodes.
-        count = 0
-        node = head[b]
-        while node != -1:
-            count += 1
-            node = pool_next[node]
-        cand_state = np.empty(count, dtype=np.int64)
-        cand_key = np.empty(count, dtype=np.int64)
-        m = 0
-        node = head[b]
-        while node != -1:
-            nxt = pool_next[node]
-            st = pool_state[node]
-            if settled[st] == 0 and packed[st] == pool_key[node]:
-                cand_state[m] = st
-                cand_key[m] = pool_key[node]
-                m += 1
-            pool_next[node] = free
-            free = node
-            node = nxt
-        live -= count
-        head[b] = -1
-        order = np.argsort(cand_key[:m], kind="mergesort")
-        p = 0
-        f_head = 0
-        f_tail = 0
-        while p < m or f_head < f_tail:
-            if f_head < f_tail and (p >= m or fifo_key[f_head] < cand_key[order[p]]):
-                s = fifo_state[f_head]
-                key = fifo_key[f_head]
-                f_head += 1
+    stop_at = ctr[_SETTLED] + budget
+    while True:
+        if ctr[_IN_BUCKET] == 0:
+            if ctr[_LIVE] == 0:
+                return _DONE
+            if ctr[_SETTLED] >= stop_at:
+                return _BUDGET
+            b = ctr[_COST] % n_buckets
+            count = 0
+            node = head[b]
+            while node != -1:
+                count += 1
+                node = pool_next[node]
+            if count > cand_state.size:
+                ctr[_NEED] = count
+                return _BUCKET_TOO_BIG
+            m = 0
+            node = head[b]
+            free = ctr[_FREE]
+            while node != -1:
+                nxt = pool_next[node]
+                st = pool_state[node]
+                if settled[st] == 0 and packed[st] == pool_key[node]:
+                    cand_state[m] = st
+                    cand_key[m] = pool_key[node]
+                    m += 1
+                pool_next[node] = free
+                free = node
+                node = nxt
+            ctr[_FREE] = free
+            ctr[_NFREE] += count
+            ctr[_LIVE] -= count
+            head[b] = -1
+            if m > 1:
+                order = np.argsort(cand_key[:m])
+                cand_state[:m] = cand_state[:m][order]
+                cand_key[:m] = cand_key[:m][order]
+            ctr[_P] = 0
+            ctr[_M] = m
+            ctr[_FHEAD] = 0
+            ctr[_FTAIL] = 0
+            ctr[_IN_BUCKET] = 1
+        c = ctr[_COST]
+        p = ctr[_P]
+        m = ctr[_M]
+        fh = ctr[_FHEAD]
+        ft = ctr[_FTAIL]
+        while p < m or fh < ft:
+            # Room for every push this state may make, or return to grow the buffers.
+            if ctr[_NFREE] + pool_state.size - ctr[_USED] < _ROOM:
+                ctr[_P], ctr[_FHEAD], ctr[_FTAIL] = p, fh, ft
+                return _POOL_FULL
+            if fifo_state.size - ft < _ROOM:
+                if fh > 0:
+                    n_live = ft - fh
+                    fifo_state[:n_live] = fifo_state[fh:ft].copy()
+                    fifo_key[:n_live] = fifo_key[fh:ft].copy()
+                    fh, ft = 0, n_live
+                if fifo_state.size - ft < _ROOM:
+                    ctr[_P], ctr[_FHEAD], ctr[_FTAIL] = p, fh, ft
+                    return _FIFO_FULL
+            if fh < ft and (p >= m or fifo_key[fh] < cand_key[p]):
+                s = fifo_state[fh]
+                key = fifo_key[fh]
+                fh += 1
             else:
-                s = cand_state[order[p]]
-                key = cand_key[order[p]]
+                s = cand_state[p]
+                key = cand_key[p]
                 p += 1
             if settled[s] != 0 or packed[s] != key:
                 continue
             settled[s] = 1
-            n_settled += 1
-            k = s % 8
-            tc = s // 8
-            i = tc % nx
-            j = (tc // nx) % ny
-            l = tc // (nx * ny)
-            base = s - k
-            # Predecessors by rotation: ROTATE_LEFT from k-1, ROTATE_RIGHT from k+1.
-            for r in range(2):
-                src = base + ((k + 7) % 8 if r == 0 else (k + 1) % 8)
-                a = 2 + r
-                pushed = _relax(src, a, key, costs, packed, action, settled)
-                if pushed:
-                    if costs[a] == 0:
-                        if f_tail == fifo_state.size:
-                            fifo_state, fifo_key = _grow_fifo(fifo_state, fifo_key, f_head, f_tail)
-                            f_tail -= f_head
-                            f_head = 0
-                        fifo_state[f_tail] = src
-                        fifo_key[f_tail] = packed[src]
-                        f_tail += 1
-                    else:
-                        if free == -1 and used == pool_state.size:
-                            pool_state, pool_key, pool_next = _grow_pool(pool_state, pool_key, pool_next)
-                        if free != -1:
-                            node = free
-                            free = pool_next[node]
-                        else:
-                            node = used
-                            used += 1
-                        bb = (c + costs[a]) % n_buckets
-                        pool_state[node] = src
-                        pool_key[node] = packed[src]
-                        pool_next[node] = head[bb]
-                        head[bb] = node
-                        live += 1
-            # Predecessors by drift/forward (same layer) and up/down (other layers).
-            for which in range(2):
-                mask = mask_h[s] if which == 0 else mask_v[s]
-                bit = 0
+            ctr[_SETTLED] += 1
+            i = s % nx
+            j = (s // nx) % ny
+            l = (s // (nx * ny)) % L
+            k = s // slab
+            # Rotations (ROTATE_LEFT from k-1, ROTATE_RIGHT from k+1), then the mask bits:
+            # mask_h bit < 16 DRIFT, else FORWARD; mask_v bit < 17 UP from below, else DOWN from above.
+            for which in range(4):
+                if which < 2:
+                    mask = one
+                else:
+                    mask = mask_h[s] if which == 2 else mask_v[s]
                 while mask != 0:
-                    if mask & one:
-                        if which == 0:
+                    low = mask & (~mask + one)
+                    bit = _CTZ_TABLE[((low * _DEBRUIJN) >> np.uint64(58))]
+                    mask = mask ^ low
+                    if which == 0:
+                        a = 2
+                        src = s + ((k + 7) % 8 - k) * slab
+                    elif which == 1:
+                        a = 3
+                        src = s + ((k + 1) % 8 - k) * slab
+                    else:
+                        if which == 2:
                             a = 0 if bit < 16 else 1
                             disp = bit + 1 if bit < 16 else bit - 15
                             ai = a
@@ -340,46 +430,36 @@ def _dijkstra(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, actio
                             disp = bit if bit < 17 else bit - 17
                             ai = 2 if bit < 17 else 3
                             ls = l + 1 if bit < 17 else l - 1
-                        js = j - _DISP_DJ_NB[disp]
-                        is_ = i - _DISP_DI_NB[disp]
-                        src = ((ls * ny + js) * nx + is_) * 8 + k
-                        usable = settled[src] == 0
-                        if usable and robust:
+                        src = ((k * L + ls) * ny + j - _DISP_DJ_NB[disp]) * nx + i - _DISP_DI_NB[disp]
+                        if settled[src] != 0:
+                            continue
+                        if robust:
                             remaining[src, ai] -= 1
-                            usable = remaining[src, ai] == 0
-                        if usable and _relax(src, a, key, costs, packed, action, settled):
-                            if costs[a] == 0:
-                                if f_tail == fifo_state.size:
-                                    fifo_state, fifo_key = _grow_fifo(fifo_state, fifo_key, f_head, f_tail)
-                                    f_tail -= f_head
-                                    f_head = 0
-                                fifo_state[f_tail] = src
-                                fifo_key[f_tail] = packed[src]
-                                f_tail += 1
-                            else:
-                                if free == -1 and used == pool_state.size:
-                                    pool_state, pool_key, pool_next = _grow_pool(pool_state, pool_key, pool_next)
-                                if free != -1:
-                                    node = free
-                                    free = pool_next[node]
-                                else:
-                                    node = used
-                                    used += 1
-                                bb = (c + costs[a]) % n_buckets
-                                pool_state[node] = src
-                                pool_key[node] = packed[src]
-                                pool_next[node] = head[bb]
-                                head[bb] = node
-                                live += 1
-                    mask = mask >> one
-                    bit += 1
-        c += 1
-    counters[0] = live
-    counters[1] = used
-    counters[2] = free
-    counters[3] = c
-    return (pool_state, pool_key, pool_next, head, counters), n_settled
-
+                            if remaining[src, ai] != 0:
+                                continue
+                    if not _relax(src, a, key, costs, packed, action, settled):
+                        continue
+                    if costs[a] == 0:
+                        fifo_state[ft] = src
+                        fifo_key[ft] = packed[src]
+                        ft += 1
+                    else:
+                        free = ctr[_FREE]
+                        if free != -1:
+                            node = free
+                            ctr[_FREE] = pool_next[node]
+                            ctr[_NFREE] -= 1
+                        else:
+                            node = ctr[_USED]
+                            ctr[_USED] += 1
+                        bb = (c + costs[a]) % n_buckets
+                        pool_state[node] = src
+                        pool_key[node] = packed[src]
+                        pool_next[node] = head[bb]
+                        head[bb] = node
+                        ctr[_LIVE] += 1
+        ctr[_IN_BUCKET] = 0
+        ctr[_COST] += 1
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _relax(src, a, key, costs, packed, action, settled):  # pragma: no cover
@@ -402,30 +482,12 @@ def _relax(src, a, key, costs, packed, action, settled):  # pragma: no cover
     return False
 
 
-@numba.njit(cache=True, nogil=True)
-def _grow_pool(pool_state, pool_key, pool_next):  # pragma: no cover
-    n = pool_state.size
-    s2 = np.empty(2 * n, dtype=np.int64)
-    k2 = np.empty(2 * n, dtype=np.int64)
-    n2 = np.empty(2 * n, dtype=np.int64)
-    s2[:n] = pool_state
-    k2[:n] = pool_key
-    n2[:n] = pool_next
-    return s2, k2, n2
-
-
-@numba.njit(cache=True, nogil=True)
-def _grow_fifo(fifo_state, fifo_key, f_head, f_tail):  # pragma: no cover
-    n = f_tail - f_head
-    size = max(2 * n, 1024)
-    s2 = np.empty(size, dtype=np.int64)
-    k2 = np.empty(size, dtype=np.int64)
-    s2[:n] = fifo_state[f_head:f_tail]
-    k2[:n] = fifo_key[f_head:f_tail]
-    return s2, k2
-
-
 _MOVE_CODES = MOVE_CODES
 _DISP_INDEX_NB = _DISP_INDEX
 _DISP_DI_NB = DISP_DI
 _DISP_DJ_NB = DISP_DJ
+# Trailing-zero count of a 64-bit power of two by a de Bruijn multiply.
+_DEBRUIJN = np.uint64(0x03F79D71B4CA8B09)
+_CTZ_TABLE = np.zeros(64, dtype=np.int64)
+for _b in range(64):
+    _CTZ_TABLE[((1 << _b) * 0x03F79D71B4CA8B09 & 0xFFFFFFFFFFFFFFFF) >> 58] = _b

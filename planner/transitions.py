@@ -113,8 +113,18 @@ class TransitionModel:
         n = outcomes_of(
             self.flow_dir, self.reach, self.lateral, l, j, i, k, int(action), out
         )
+        return [self.state_of(int(out[m])) for m in range(n)]
+
+    def state_index(self, l: int, j: int, i: int, k: int) -> int:
+        """Internal state index: heading-major, ``((k * L + l) * ny + j) * nx + i``."""
         L, ny, nx, _ = self.grid.shape
-        return [tuple(int(x) for x in np.unravel_index(out[m], (L, ny, nx, N_HEADINGS))) for m in range(n)]
+        return ((k * L + l) * ny + j) * nx + i
+
+    def state_of(self, index: int) -> tuple[int, int, int, int]:
+        """``(l, j, i, k)`` of an internal state index."""
+        L, ny, nx, _ = self.grid.shape
+        k, l, j, i = np.unravel_index(index, (N_HEADINGS, L, ny, nx))
+        return (int(l), int(j), int(i), int(k))
 
 
 def build_transitions(
@@ -142,6 +152,9 @@ def build_transitions(
 def outcomes_of(flow_dir, reach, lateral, l, j, i, k, action, out):  # pragma: no cover - compiled
     """Write the distinct outcome state indices of ``action`` at ``(l, j, i, k)`` into ``out``.
 
+    State indices are internal and heading-major, ``((k * L + l) * ny + j) * nx + i``,
+    so that the moves of one heading stay in one contiguous slab (see ``state_index``).
+
     Returns how many (0 when the action is unavailable). Spec section 5:
     ``n`` and ``w`` are those of the state's own cell; a move steps tile by tile
     and stops before land or the grid edge; lateral uncertainty adds ``d +- 1``.
@@ -152,7 +165,7 @@ def outcomes_of(flow_dir, reach, lateral, l, j, i, k, action, out):  # pragma: n
         return 0
     if action == 2 or action == 3:  # rotations: one outcome, same cell
         k2 = (k + 1) % 8 if action == 2 else (k + 7) % 8
-        out[0] = ((l * ny + j) * nx + i) * 8 + k2
+        out[0] = ((k2 * L + l) * ny + j) * nx + i
         return 1
     lt = l
     if action == 4:
@@ -172,7 +185,7 @@ def outcomes_of(flow_dir, reach, lateral, l, j, i, k, action, out):  # pragma: n
         n = np.int64(2) if s45 == 0 else (np.int64(1) if s45 <= 2 else np.int64(0))
         d = k if action == 1 else w
     if n == 0:
-        out[0] = ((lt * ny + j) * nx + i) * 8 + k
+        out[0] = ((k * L + lt) * ny + j) * nx + i
         return 1
     count = 0
     n_dirs = 3 if lateral else 1
@@ -182,7 +195,7 @@ def outcomes_of(flow_dir, reach, lateral, l, j, i, k, action, out):  # pragma: n
         steps = n if n < r else r
         jj = j + steps * _DJ[dd]
         ii = i + steps * _DI[dd]
-        s = ((lt * ny + jj) * nx + ii) * 8 + k
+        s = ((k * L + lt) * ny + jj) * nx + ii
         dup = False
         for q in range(count):
             if out[q] == s:

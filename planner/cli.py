@@ -1,0 +1,255 @@
+"""``lrauv``: the one console command. Parses, calls one library function, maps errors to exit codes.
+
+Bad input prints one line ``lrauv: error: ...`` to stderr and exits with status 2.
+Subcommands of other packages are imported only when used, so ``lrauv exec``
+never loads the planner's heavy dependencies.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from planner.errors import PlannerError
+
+EXIT_BAD_INPUT = 2
+
+
+def _floats(text: str, n: int | None, what: str) -> list[float]:
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{what}: expected comma-separated numbers; got {text!r}") from None
+    if n is not None and len(values) != n:
+        raise argparse.ArgumentTypeError(f"{what}: expected {n} comma-separated numbers; got {len(values)} in {text!r}")
+    return values
+
+
+def _costs(text: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for part in text.split(","):
+        name, _, value = part.partition("=")
+        if name not in ("drift", "forward", "rotate", "glide") or not value:
+            raise argparse.ArgumentTypeError(f"costs: expected NAME=VALUE with NAME in drift, forward, rotate, glide; got {part!r}")
+        try:
+            out[name] = float(value) if "." in value or "e" in value.lower() else int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"costs.{name}: expected a number; got {value!r}") from None
+    return out
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="lrauv", description="Feedback motion planning and onboard execution for long-range AUVs.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    plan = sub.add_parser("plan", help="plan a feedback policy and write the policy table")
+    plan.add_argument("mission", nargs="?", type=Path, help="mission YAML file (flags below override it)")
+    plan.add_argument("--forecast", type=Path, help="forecast netCDF file")
+    plan.add_argument("--variables", type=lambda t: t.split(","), help="U,V variable names, when not found by CF standard names")
+    plan.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
+    plan.add_argument("--bbox", type=lambda t: _floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
+    plan.add_argument("--nx", type=int, help="columns, west to east")
+    plan.add_argument("--ny", type=int, help="rows, south to north")
+    plan.add_argument("--depths", type=lambda t: _floats(t, None, "depths"), help="layer depths in metres, e.g. 0,5,10,15")
+    plan.add_argument("--time-index", type=int, help="forecast time step by position (0 = first)")
+    plan.add_argument("--time", help="forecast time (ISO 8601); the nearest step is used")
+    plan.add_argument("--goal", type=lambda t: _floats(t, 3, "goal"), help="LON,LAT,DEPTH of the goal")
+    plan.add_argument("--goal-radius", type=int, help="goal radius in cells (default 1)")
+    plan.add_argument("--criterion", choices=["robust", "optimistic"])
+    plan.add_argument("--uncertainty", choices=["lateral", "none"])
+    plan.add_argument("--costs", type=_costs, help="e.g. drift=0,forward=4,rotate=10,glide=2")
+    plan.add_argument("--calm-speed", type=float, help="calm threshold in m/s (default 0.01)")
+    plan.add_argument("--out", type=Path, help="policy table to write (default: <mission name>.lrpt)")
+    plan.add_argument("--no-compress", action="store_true", help="store the table payload uncompressed")
+    plan.add_argument("--export-values", type=Path, help="also write the arrays of spec section 8 to this .npz")
+    plan.add_argument("--plot", type=Path, metavar="DIR", help="write PNG pictures of the flow, policy and nominal path here")
+    plan.add_argument("--plot-heading", type=int, default=0, help="heading k (0 = E, counter-clockwise) for the policy picture")
+    plan.add_argument("--plot-layer", type=int, help="layer for the policy picture (default: the goal's)")
+    plan.add_argument("--start", type=lambda t: _floats(t, 4, "start"), help="LON,LAT,DEPTH,HEADING_DEG for the nominal path")
+    plan.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+    fc = sub.add_parser("forecast", help="inspect or generate forecasts")
+    fsub = fc.add_subparsers(dest="forecast_command", required=True)
+    info = fsub.add_parser("info", help="describe a forecast file as the loader understands it")
+    info.add_argument("file", type=Path)
+    info.add_argument("--variables", type=lambda t: t.split(","))
+    info.add_argument("--grid-file", type=Path)
+    synth = fsub.add_parser("synth", help="write the built-in synthetic Southern California Bight forecast")
+    synth.add_argument("out", type=Path)
+    synth.add_argument("--seed", type=int, default=0)
+    synth.add_argument("--hours", type=int, default=72)
+    synth.add_argument("--issue", type=int, help="forecast issue number (error shrinks with each issue); default: the truth")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``lrauv``; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "plan":
+            return _plan(args)
+        if args.command == "forecast":
+            return _forecast(args)
+    except PlannerError as exc:
+        print(f"lrauv: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("lrauv: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+def _forecast(args: argparse.Namespace) -> int:
+    if args.forecast_command == "info":
+        from planner.forecast import describe, open_forecast
+
+        variables = tuple(args.variables) if args.variables else None
+        if variables is not None and len(variables) != 2:
+            raise PlannerError(f"--variables: expected two names U,V; got {args.variables}")
+        print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))  # type: ignore[arg-type]
+        return 0
+    from planner.synthetic import SyntheticSettings, write_synthetic
+
+    path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
+    print(f"wrote {path}")
+    return 0
+
+
+def _plan(args: argparse.Namespace) -> int:
+    from planner.grid import BBox
+    from planner.plan import PlanRequest, export_values, make_plan
+    from planner.settings import Costs, Goal, PlanSettings
+
+    progress = not args.quiet
+    mission = None
+    if args.mission is not None:
+        from planner.mission import load_mission
+
+        mission = load_mission(args.mission)
+    # Forecast: the flag, else the mission's source.
+    forecast_path = args.forecast
+    time_index, time_iso = args.time_index, args.time
+    variables = tuple(args.variables) if args.variables else None
+    grid_file = args.grid_file
+    if forecast_path is None and mission is not None:
+        forecast_path = _mission_forecast(mission, out_dir=(args.out or Path(mission.name + ".lrpt")).parent)
+        if time_index is None and time_iso is None:
+            time_index, time_iso = mission.forecast.time_index, mission.forecast.time_iso
+        variables = variables or mission.forecast.variables
+        grid_file = grid_file or mission.forecast.grid_file
+    if forecast_path is None:
+        raise PlannerError("plan: no forecast: give --forecast FILE.nc or a mission file")
+    if variables is not None and len(variables) != 2:
+        raise PlannerError(f"--variables: expected two names U,V; got {','.join(variables)}")
+    # Grid.
+    bbox = BBox(west_deg=args.bbox[0], south_deg=args.bbox[1], east_deg=args.bbox[2], north_deg=args.bbox[3]) if args.bbox else None
+    nx, ny = args.nx, args.ny
+    depths = tuple(args.depths) if args.depths else None
+    if mission is not None:
+        bbox = bbox or mission.region.bbox
+        nx, ny = nx or mission.region.nx, ny or mission.region.ny
+        depths = depths or mission.region.depths_m
+    if depths is None:
+        raise PlannerError("plan: no depth layers: give --depths D0,D1,... or a mission file")
+    # Goal.
+    if args.goal is not None:
+        goal = Goal(lon_deg=args.goal[0], lat_deg=args.goal[1], depth_m=args.goal[2],
+                    radius_cells=args.goal_radius if args.goal_radius is not None else 1)
+    elif mission is not None:
+        goal = mission.goals[0].goal
+        if args.goal_radius is not None:
+            goal = Goal(lon_deg=goal.lon_deg, lat_deg=goal.lat_deg, depth_m=goal.depth_m, radius_cells=args.goal_radius)
+    else:
+        raise PlannerError("plan: no goal: give --goal LON,LAT,DEPTH or a mission file")
+    # Settings.
+    base = mission.settings if mission is not None else PlanSettings()
+    costs = base.costs
+    if args.costs:
+        fields = {"drift": costs.drift, "forward": costs.forward, "rotate": costs.rotate, "glide": costs.glide}
+        fields.update(args.costs)
+        costs = Costs(**fields)
+    settings = PlanSettings(
+        model=base.model,
+        criterion=args.criterion or base.criterion,
+        uncertainty=args.uncertainty or base.uncertainty,
+        costs=costs,
+        calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
+    )
+    request = PlanRequest(
+        forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,
+        bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,  # type: ignore[arg-type]
+        grid_file=grid_file,
+    )
+    out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
+    t0 = time.perf_counter()
+    if progress:
+        print(f"planning on {forecast_path} ({settings.criterion}, {settings.uncertainty})", file=sys.stderr)
+    result = make_plan(request, progress=progress)
+    data = result.table.to_bytes(compress=not args.no_compress)
+    from planner.table import write_atomic
+
+    write_atomic(out, data)
+    sol = result.solution
+    water_states = int(result.model.water.sum()) * 8
+    reachable = int(sol.reachable.sum())
+    raw = len(result.table.to_bytes(compress=False))
+    print(f"table      {out}  ({len(data):,} bytes; {raw:,} uncompressed; {result.grid.n_states:,} states)")
+    print(f"forecast   {result.forecast.source} [{result.forecast.identity}] step {result.time_index}"
+          f" ({result.table.forecast_time or 'no reference date'})")
+    print(f"grid       {result.grid.nx} x {result.grid.ny} cells x {result.grid.n_layers} layers"
+          f" ({', '.join(f'{d:g}' for d in result.grid.depth_m)} m) x 8 headings")
+    print(f"reachable  {reachable:,} of {water_states:,} water states ({reachable / max(water_states, 1):.1%})")
+    t = result.timings_s
+    print(f"time       load {t['load_s']:.2f} s, resample {t['resample_s']:.2f} s, plan {t['plan_s']:.3f} s,"
+          f" total {time.perf_counter() - t0:.2f} s")
+    if args.export_values:
+        print(f"values     {export_values(result, args.export_values)}")
+    if args.plot:
+        from planner.plot import default_start, plot_all
+
+        start = default_start(sol) if args.start is None else _start_state(result, args.start)
+        layer = args.plot_layer
+        if layer is not None and not 0 <= layer < result.grid.n_layers:
+            raise PlannerError(f"--plot-layer: expected 0..{result.grid.n_layers - 1}; got {layer}")
+        if not 0 <= args.plot_heading < 8:
+            raise PlannerError(f"--plot-heading: expected 0..7 (0 = east, counter-clockwise); got {args.plot_heading}")
+        paths = plot_all(result.u_m_s, result.v_m_s, sol, args.plot, start=start, heading=args.plot_heading, layer=layer)
+        for p in paths:
+            print(f"picture    {p}")
+    return 0
+
+
+def _start_state(result, start: list[float]) -> tuple[int, int, int, int]:  # type: ignore[no-untyped-def]
+    lon, lat, depth, heading = start
+    cell = result.table.locate(lat, lon, depth)
+    if cell is None:
+        raise PlannerError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is outside the planning grid")
+    l, j, i = cell
+    if not result.model.water[l, j, i]:
+        raise PlannerError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is on land")
+    return (l, j, i, result.table.heading_index(j, heading))
+
+
+def _mission_forecast(mission, *, out_dir: Path) -> Path:  # type: ignore[no-untyped-def]
+    """The forecast file a mission names: its file, the newest file in its directory, or a generated one."""
+    src = mission.forecast
+    if src.file is not None:
+        return src.file
+    if src.directory is not None:
+        files = sorted(src.directory.glob("*.nc"), key=lambda p: (p.stat().st_mtime, p.name))
+        if not files:
+            raise PlannerError(f"{mission.path}: forecast.directory {src.directory} holds no .nc files")
+        return files[-1]
+    from planner.synthetic import SyntheticSettings, write_synthetic
+
+    path = out_dir / f"synthetic_seed{src.synthetic_seed}_{src.synthetic_hours}h.nc"
+    if not path.exists():
+        write_synthetic(path, SyntheticSettings(seed=src.synthetic_seed, hours=src.synthetic_hours))
+    return path
+
+
+if __name__ == "__main__":
+    sys.exit(main())

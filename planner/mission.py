@@ -1,0 +1,366 @@
+"""Missions in YAML: parsed once, at the edge, into frozen dataclasses (docs/missions.md).
+
+Every error names the file, the line and the key path, says what was expected
+and what was found: ``missions/x.yaml:14 goals[0].depth_m: 40 m is deeper than
+the deepest layer 15 m``. Unknown keys are errors.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal, get_args
+
+import yaml
+
+from planner.errors import MissionError, PlannerError
+from planner.grid import BBox
+from planner.settings import Costs, Criterion, Goal, Model, PlanSettings, Uncertainty
+
+OnArrival = Literal["hold", "surface", "drift", "next"]
+BreachAction = Literal["surface", "drift", "hold"]
+MAX_GOALS = 1000
+
+
+@dataclass(frozen=True, kw_only=True)
+class ForecastSource:
+    """Exactly one of ``file``, ``directory`` (watched for new files) or ``synthetic_seed``."""
+
+    file: Path | None = None
+    directory: Path | None = None
+    synthetic_seed: int | None = None
+    synthetic_hours: int = 72
+    time_index: int | None = None
+    time_iso: str | None = None
+    variables: tuple[str, str] | None = None
+    grid_file: Path | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Region:
+    """Planning grid: ``bbox`` None means the forecast's own grid."""
+
+    bbox: BBox | None
+    nx: int | None
+    ny: int | None
+    depths_m: tuple[float, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class EnergyModel:
+    """Electrical power by use, watts (defaults describe a Tethys-class LRAUV; docs/missions.md)."""
+
+    hotel_w: float = 8.0
+    propulsion_w: float = 12.0
+    buoyancy_w: float = 15.0
+    battery_wh: float = 3000.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Vehicle:
+    cruise_speed_m_s: float = 1.0
+    yaw_rate_deg_s: float = 10.0
+    glide_rate_m_s: float = 0.2
+    energy: EnergyModel = field(default_factory=EnergyModel)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MissionGoal:
+    goal: Goal
+    on_arrival: OnArrival = "hold"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Replanning:
+    on_new_forecast: bool = True
+    period_s: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Safety:
+    max_mission_time_s: float = 7 * 86400.0
+    min_battery_pct: float = 10.0
+    max_depth_m: float = 50.0
+    geofence: tuple[tuple[float, float], ...] | None = None  # (lon_deg, lat_deg) vertices
+    link_loss_timeout_s: float = 30.0
+    on_breach: BreachAction = "surface"
+
+
+@dataclass(frozen=True, kw_only=True)
+class Mission:
+    name: str
+    path: Path
+    forecast: ForecastSource
+    region: Region
+    vehicle: Vehicle
+    settings: PlanSettings
+    goals: tuple[MissionGoal, ...]
+    replanning: Replanning
+    safety: Safety
+
+
+class _Doc:
+    """A YAML document with the line of every key path, for error messages."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self.path = path
+        self.lines: dict[str, int] = {}
+        try:
+            node = yaml.compose(text, Loader=yaml.SafeLoader)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            line = f":{mark.line + 1}" if mark is not None else ""
+            problem = getattr(exc, "problem", None) or str(exc)
+            raise MissionError(f"{path}{line}: not valid YAML: {problem}") from None
+        if node is None:
+            raise MissionError(f"{path}: the file is empty; expected a mission mapping")
+        self.root = self._build(node, "")
+
+    def _build(self, node: yaml.Node, key: str) -> Any:
+        self.lines.setdefault(key, node.start_mark.line + 1)
+        if isinstance(node, yaml.MappingNode):
+            out: dict[str, Any] = {}
+            for k_node, v_node in node.value:
+                name = str(k_node.value)
+                sub = f"{key}.{name}" if key else name
+                if name in out:
+                    raise MissionError(f"{self.path}:{k_node.start_mark.line + 1} {sub}: duplicate key")
+                self.lines[sub] = k_node.start_mark.line + 1
+                out[name] = self._build(v_node, sub)
+            return out
+        if isinstance(node, yaml.SequenceNode):
+            return [self._build(v, f"{key}[{n}]") for n, v in enumerate(node.value)]
+        return _scalar(node)
+
+    def error(self, key: str, message: str) -> MissionError:
+        parent = key
+        line = self.lines.get(parent)
+        while line is None and parent:  # a missing key: point at the nearest enclosing one
+            parent = parent[: max(parent.rfind("."), parent.rfind("["), 0)]
+            line = self.lines.get(parent)
+        where = f"{self.path}:{line}" if line else str(self.path)
+        return MissionError(f"{where} {key}: {message}" if key else f"{where}: {message}")
+
+
+def _scalar(node: yaml.ScalarNode) -> Any:
+    loader = yaml.SafeLoader("")
+    return loader.construct_object(node, deep=True)
+
+
+class _Section:
+    """Typed access to one mapping of the document, refusing unknown keys."""
+
+    def __init__(self, doc: _Doc, value: Any, key: str, allowed: set[str]) -> None:
+        self.doc, self.key = doc, key
+        if value is None:
+            value = {}
+        if not isinstance(value, dict):
+            raise doc.error(key, f"expected a mapping; got {type(value).__name__} {value!r}")
+        unknown = sorted(set(value) - allowed)
+        if unknown:
+            first = f"{key}.{unknown[0]}" if key else unknown[0]
+            raise doc.error(first, f"unknown key; expected one of: {', '.join(sorted(allowed))}")
+        self.value = value
+
+    def path(self, name: str) -> str:
+        return f"{self.key}.{name}" if self.key else name
+
+    def has(self, name: str) -> bool:
+        return name in self.value and self.value[name] is not None
+
+    def raw(self, name: str, default: Any = None) -> Any:
+        return self.value.get(name, default)
+
+    def number(self, name: str, default: float | None = None, *, minimum: float | None = None, unit: str = "") -> float:
+        if name not in self.value or self.value[name] is None:
+            if default is None:
+                raise self.doc.error(self.path(name), f"required; expected a number{(' in ' + unit) if unit else ''}")
+            return default
+        v = self.value[name]
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise self.doc.error(self.path(name), f"expected a number{(' in ' + unit) if unit else ''}; got {v!r}")
+        if minimum is not None and v < minimum:
+            raise self.doc.error(self.path(name), f"expected at least {minimum:g}{(' ' + unit) if unit else ''}; got {v!r}")
+        return float(v)
+
+    def integer(self, name: str, default: int | None = None, *, minimum: int | None = None) -> int:
+        if name not in self.value or self.value[name] is None:
+            if default is None:
+                raise self.doc.error(self.path(name), "required; expected a whole number")
+            return default
+        v = self.value[name]
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.doc.error(self.path(name), f"expected a whole number; got {v!r}")
+        if minimum is not None and v < minimum:
+            raise self.doc.error(self.path(name), f"expected at least {minimum}; got {v}")
+        return v
+
+    def text(self, name: str, default: str | None = None) -> str:
+        if name not in self.value or self.value[name] is None:
+            if default is None:
+                raise self.doc.error(self.path(name), "required; expected text")
+            return default
+        v = self.value[name]
+        if not isinstance(v, str) or not v.strip():
+            raise self.doc.error(self.path(name), f"expected non-empty text; got {v!r}")
+        return v
+
+    def choice(self, name: str, options: Any, default: str) -> str:
+        v = self.text(name, default)
+        allowed = get_args(options)
+        if v not in allowed:
+            raise self.doc.error(self.path(name), f"expected one of {', '.join(allowed)}; got {v!r}")
+        return v
+
+    def boolean(self, name: str, default: bool) -> bool:
+        v = self.value.get(name, default)
+        if not isinstance(v, bool):
+            raise self.doc.error(self.path(name), f"expected true or false; got {v!r}")
+        return v
+
+    def section(self, name: str, allowed: set[str]) -> _Section:
+        return _Section(self.doc, self.value.get(name), self.path(name), allowed)
+
+
+def load_mission(path: str | os.PathLike[str]) -> Mission:
+    """Read and validate a mission file; raise MissionError naming file, line and key."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MissionError(f"{p}: no such mission file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MissionError(f"{p}: cannot read: {exc}") from None
+    doc = _Doc(p, text)
+    top = _Section(doc, doc.root, "", {"name", "forecast", "region", "vehicle", "planning", "goals", "replanning", "safety"})
+    base = p.parent
+
+    fc = top.section("forecast", {"file", "directory", "synthetic", "time", "time_index", "variables", "grid_file"})
+    sources = [k for k in ("file", "directory", "synthetic") if fc.has(k)]
+    if len(sources) != 1:
+        raise doc.error("forecast", f"expected exactly one of file, directory or synthetic; got {sources or 'none'}")
+    seed, hours = None, 72
+    if fc.has("synthetic"):
+        syn = fc.section("synthetic", {"seed", "hours"})
+        seed, hours = syn.integer("seed", 0, minimum=0), syn.integer("hours", 72, minimum=1)
+    variables = fc.raw("variables")
+    if variables is not None and not (
+        isinstance(variables, list) and len(variables) == 2 and all(isinstance(x, str) for x in variables)
+    ):
+        raise doc.error("forecast.variables", f"expected two variable names [U, V]; got {variables!r}")
+    forecast = ForecastSource(
+        file=(base / fc.text("file")) if fc.has("file") else None,
+        directory=(base / fc.text("directory")) if fc.has("directory") else None,
+        synthetic_seed=seed,
+        synthetic_hours=hours,
+        time_index=fc.integer("time_index", minimum=0) if fc.has("time_index") else None,
+        time_iso=str(fc.raw("time")) if fc.has("time") else None,
+        variables=tuple(variables) if variables else None,  # type: ignore[arg-type]
+        grid_file=(base / fc.text("grid_file")) if fc.has("grid_file") else None,
+    )
+
+    rg = top.section("region", {"bbox", "nx", "ny", "depths_m"})
+    depths = rg.raw("depths_m")
+    if not (isinstance(depths, list) and depths and all(isinstance(d, int | float) and not isinstance(d, bool) for d in depths)):
+        raise doc.error("region.depths_m", f"expected a list of layer depths in metres; got {depths!r}")
+    if any(d < 0 for d in depths) or any(b <= a for a, b in zip(depths, depths[1:])):
+        raise doc.error("region.depths_m", f"expected non-negative depths, strictly increasing; got {depths}")
+    bbox_raw = rg.raw("bbox", "forecast")
+    if bbox_raw == "forecast":
+        bbox, nx, ny = None, (rg.integer("nx", minimum=2) if rg.has("nx") else None), (rg.integer("ny", minimum=2) if rg.has("ny") else None)
+    else:
+        if not (isinstance(bbox_raw, list) and len(bbox_raw) == 4 and all(isinstance(x, int | float) and not isinstance(x, bool) for x in bbox_raw)):
+            raise doc.error("region.bbox", f"expected [WEST, SOUTH, EAST, NORTH] in degrees or 'forecast'; got {bbox_raw!r}")
+        try:
+            bbox = BBox(west_deg=bbox_raw[0], south_deg=bbox_raw[1], east_deg=bbox_raw[2], north_deg=bbox_raw[3])
+        except PlannerError as exc:
+            raise doc.error("region.bbox", str(exc).split(": ", 1)[-1]) from None
+        nx, ny = rg.integer("nx", minimum=2), rg.integer("ny", minimum=2)
+    region = Region(bbox=bbox, nx=nx, ny=ny, depths_m=tuple(float(d) for d in depths))
+
+    vh = top.section("vehicle", {"cruise_speed_m_s", "yaw_rate_deg_s", "glide_rate_m_s", "energy"})
+    en = vh.section("energy", {"hotel_w", "propulsion_w", "buoyancy_w", "battery_wh"})
+    d_en = EnergyModel()
+    vehicle = Vehicle(
+        cruise_speed_m_s=vh.number("cruise_speed_m_s", 1.0, minimum=0.01, unit="m/s"),
+        yaw_rate_deg_s=vh.number("yaw_rate_deg_s", 10.0, minimum=0.1, unit="deg/s"),
+        glide_rate_m_s=vh.number("glide_rate_m_s", 0.2, minimum=0.01, unit="m/s"),
+        energy=EnergyModel(
+            hotel_w=en.number("hotel_w", d_en.hotel_w, minimum=0, unit="W"),
+            propulsion_w=en.number("propulsion_w", d_en.propulsion_w, minimum=0, unit="W"),
+            buoyancy_w=en.number("buoyancy_w", d_en.buoyancy_w, minimum=0, unit="W"),
+            battery_wh=en.number("battery_wh", d_en.battery_wh, minimum=1, unit="Wh"),
+        ),
+    )
+
+    pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s"})
+    cs = pl.section("costs", {"drift", "forward", "rotate", "glide"})
+    d_costs = Costs()
+    try:
+        costs = Costs(**{name: cs.raw(name, getattr(d_costs, name)) for name in ("drift", "forward", "rotate", "glide")})
+    except PlannerError as exc:
+        key = str(exc).split(":", 1)[0]
+        raise doc.error(f"planning.{key}", str(exc).split(": ", 1)[-1]) from None
+    settings = PlanSettings(
+        model=pl.choice("model", Model, "paper"),  # type: ignore[arg-type]
+        criterion=pl.choice("criterion", Criterion, "robust"),  # type: ignore[arg-type]
+        uncertainty=pl.choice("uncertainty", Uncertainty, "lateral"),  # type: ignore[arg-type]
+        costs=costs,
+        calm_speed_m_s=pl.number("calm_speed_m_s", 0.01, minimum=0, unit="m/s"),
+    )
+
+    goals_raw = top.raw("goals")
+    if not isinstance(goals_raw, list) or not goals_raw:
+        raise doc.error("goals", f"expected a list of one or more goals; got {goals_raw!r}")
+    if len(goals_raw) > MAX_GOALS:
+        raise doc.error("goals", f"expected at most {MAX_GOALS} goals; got {len(goals_raw)}")
+    goals = []
+    deepest = region.depths_m[-1]
+    for n, g_raw in enumerate(goals_raw):
+        g = _Section(doc, g_raw, f"goals[{n}]", {"lat_deg", "lon_deg", "depth_m", "radius_cells", "on_arrival"})
+        lat = g.number("lat_deg", unit="degrees")
+        lon = g.number("lon_deg", unit="degrees")
+        depth = g.number("depth_m", unit="m", minimum=0)
+        if not -90 <= lat <= 90:
+            raise doc.error(g.path("lat_deg"), f"expected a latitude in [-90, 90]; got {lat:g}")
+        if depth > deepest + 1e-9:
+            raise doc.error(g.path("depth_m"), f"{depth:g} m is deeper than the deepest layer {deepest:g} m")
+        goals.append(
+            MissionGoal(
+                goal=Goal(lon_deg=lon, lat_deg=lat, depth_m=depth, radius_cells=g.integer("radius_cells", 1, minimum=0)),
+                on_arrival=g.choice("on_arrival", OnArrival, "hold"),  # type: ignore[arg-type]
+            )
+        )
+
+    rp = top.section("replanning", {"on_new_forecast", "period_h"})
+    replanning = Replanning(
+        on_new_forecast=rp.boolean("on_new_forecast", True),
+        period_s=rp.number("period_h", minimum=0.01, unit="h") * 3600.0 if rp.has("period_h") else None,
+    )
+
+    sf = top.section("safety", {"max_mission_time_h", "min_battery_pct", "max_depth_m", "geofence", "link_loss_timeout_s", "on_breach"})
+    fence_raw = sf.raw("geofence")
+    fence = None
+    if fence_raw is not None:
+        if not (isinstance(fence_raw, list) and len(fence_raw) >= 3 and all(
+            isinstance(pt, list) and len(pt) == 2 and all(isinstance(x, int | float) and not isinstance(x, bool) for x in pt)
+            for pt in fence_raw
+        )):
+            raise doc.error("safety.geofence", "expected a polygon of at least 3 [LON, LAT] vertices in degrees")
+        fence = tuple((float(a), float(b)) for a, b in fence_raw)
+    safety = Safety(
+        max_mission_time_s=sf.number("max_mission_time_h", 7 * 24.0, minimum=0.01, unit="h") * 3600.0,
+        min_battery_pct=sf.number("min_battery_pct", 10.0, minimum=0, unit="%"),
+        max_depth_m=sf.number("max_depth_m", 50.0, minimum=0, unit="m"),
+        geofence=fence,
+        link_loss_timeout_s=sf.number("link_loss_timeout_s", 30.0, minimum=0.1, unit="s"),
+        on_breach=sf.choice("on_breach", BreachAction, "surface"),  # type: ignore[arg-type]
+    )
+    if safety.max_depth_m < deepest:
+        raise doc.error("safety.max_depth_m", f"{safety.max_depth_m:g} m is shallower than the deepest layer {deepest:g} m")
+    return Mission(
+        name=top.text("name"), path=p, forecast=forecast, region=region, vehicle=vehicle, settings=settings,
+        goals=tuple(goals), replanning=replanning, safety=safety,
+    )

@@ -1,0 +1,415 @@
+"""The compact policy table: the file uploaded to the vehicle (docs/policy-table.md).
+
+Reading needs only numpy and the standard library, so the executive can use
+this module without the planner's solver, xarray or scipy. Writing takes a
+``Solution``-like object (anything with ``action``, ``model.water`` and the
+grid) and never imports the solver either.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import tempfile
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.actions import Action
+from planner.errors import TableError
+from planner.headings import N_HEADINGS, bearings_deg, cell_size_m
+
+MAGIC = b"LRAUVPT\x00"
+FORMAT_VERSION = 1
+FLAG_ZLIB = 0x0001
+_PREAMBLE = struct.Struct("<8sHHI")  # magic, version, flags, header length
+_PAYLOAD = struct.Struct("<II")  # stored payload length, raw payload length
+_CRC = struct.Struct("<I")
+MAX_STATES = 1 << 31
+
+LookupReason = Literal["ok", "at_goal", "unreachable", "outside_grid", "land"]
+
+
+@dataclass(frozen=True, slots=True)
+class Lookup:
+    """The table's answer for one position and heading; the executive never gets a bare None."""
+
+    action: Action
+    reason: LookupReason
+    state: tuple[int, int, int, int] | None  # (l, j, i, k) as exported, None outside the grid
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PolicyTable:
+    """Actions for every state ``[l, j, i, k]`` plus the water mask ``[l, j, i]`` and provenance.
+
+    Geometry follows spec section 1: cell centres ``lon0 + i * dlon``, ``lat0 + j * dlat``.
+    """
+
+    lon0_deg: float
+    lat0_deg: float
+    dlon_deg: float
+    dlat_deg: float
+    nx: int
+    ny: int
+    depth_m: tuple[float, ...]
+    goal_lon_deg: float
+    goal_lat_deg: float
+    goal_depth_m: float
+    goal_radius_cells: int
+    criterion: str
+    uncertainty: str
+    model: str
+    costs: dict[str, int]
+    forecast_source: str
+    forecast_identity: str
+    forecast_time: str | None
+    planner_version: str
+    actions: NDArray[np.uint8] = field(repr=False)  # (L, ny, nx, 8)
+    water: NDArray[np.bool_] = field(repr=False)  # (L, ny, nx)
+
+    def __post_init__(self) -> None:
+        shape = (len(self.depth_m), self.ny, self.nx)
+        if self.actions.shape != shape + (N_HEADINGS,) or self.water.shape != shape:
+            raise TableError(f"table arrays: expected {shape + (N_HEADINGS,)} and {shape}; got {self.actions.shape} and {self.water.shape}")
+        for arr in (self.actions, self.water):
+            arr.setflags(write=False)
+        dx_m, dy_m = cell_size_m(self.lat_deg, self.dlon_deg, self.dlat_deg)
+        bearings = bearings_deg(dx_m, dy_m)
+        bearings.setflags(write=False)
+        object.__setattr__(self, "_bearings", bearings)
+
+    @classmethod
+    def from_solution(
+        cls,
+        solution: Any,
+        *,
+        forecast_source: str,
+        forecast_identity: str,
+        forecast_time: str | None,
+    ) -> PolicyTable:
+        """Pack a solved plan (``planner.solve.Solution``) with its provenance."""
+        from planner import __version__
+
+        model = solution.model
+        grid = model.grid
+        settings = model.settings
+        goal = solution.goal
+        return cls(
+            lon0_deg=float(grid.lon_deg[0]),
+            lat0_deg=float(grid.lat_deg[0]),
+            dlon_deg=grid.dlon_deg,
+            dlat_deg=grid.dlat_deg,
+            nx=grid.nx,
+            ny=grid.ny,
+            depth_m=tuple(float(d) for d in grid.depth_m),
+            goal_lon_deg=float(goal.lon_deg),
+            goal_lat_deg=float(goal.lat_deg),
+            goal_depth_m=float(goal.depth_m),
+            goal_radius_cells=int(goal.radius_cells),
+            criterion=settings.criterion,
+            uncertainty=settings.uncertainty,
+            model=settings.model,
+            costs={"drift": settings.costs.drift, "forward": settings.costs.forward,
+                   "rotate": settings.costs.rotate, "glide": settings.costs.glide},
+            forecast_source=forecast_source,
+            forecast_identity=forecast_identity,
+            forecast_time=forecast_time,
+            planner_version=__version__,
+            actions=np.ascontiguousarray(solution.action, dtype=np.uint8),
+            water=np.ascontiguousarray(model.water),
+        )
+
+    # -- geometry -------------------------------------------------------------------
+    @property
+    def lon_deg(self) -> NDArray[np.float64]:
+        return self.lon0_deg + self.dlon_deg * np.arange(self.nx)
+
+    @property
+    def lat_deg(self) -> NDArray[np.float64]:
+        return self.lat0_deg + self.dlat_deg * np.arange(self.ny)
+
+    @property
+    def n_layers(self) -> int:
+        return len(self.depth_m)
+
+    @property
+    def n_states(self) -> int:
+        return self.n_layers * self.ny * self.nx * N_HEADINGS
+
+    def bearing_deg(self, j: int, k: int) -> float:
+        """True compass bearing of grid direction ``k`` in row ``j`` (spec section 2)."""
+        return float(self._bearings[j, k])  # type: ignore[attr-defined]
+
+    def cell_centre(self, j: int, i: int) -> tuple[float, float]:
+        """``(lat_deg, lon_deg)`` of a cell centre."""
+        return (self.lat0_deg + j * self.dlat_deg, self.lon0_deg + i * self.dlon_deg)
+
+    def locate(self, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[int, int, int] | None:
+        """Cell ``(l, j, i)`` containing a position, or None outside the planned volume.
+
+        A cell spans half a spacing either side of its centre; the layer is the
+        nearest one (lower index at a midpoint, as for the goal in spec section 6),
+        and a depth more than half a layer spacing below the deepest layer is outside.
+        """
+        if not (math.isfinite(lat_deg) and math.isfinite(lon_deg) and math.isfinite(depth_m)):
+            return None
+        fi = (lon_deg - self.lon0_deg) / self.dlon_deg
+        fj = (lat_deg - self.lat0_deg) / self.dlat_deg
+        if not (-0.5 <= fi <= self.nx - 0.5 and -0.5 <= fj <= self.ny - 0.5):
+            return None
+        i = min(max(math.ceil(fi - 0.5), 0), self.nx - 1)
+        j = min(max(math.ceil(fj - 0.5), 0), self.ny - 1)
+        depths = self.depth_m
+        below = 0.5 * (depths[-1] - depths[-2]) if len(depths) > 1 else 2.5
+        if depth_m > depths[-1] + below:
+            return None
+        l = min(range(len(depths)), key=lambda n: (abs(depths[n] - depth_m), n))
+        return (l, j, i)
+
+    def heading_index(self, j: int, heading_deg: float) -> int:
+        """Grid direction nearest to a compass heading in row ``j``; ties to the lower ``k`` (spec 2)."""
+        row = self._bearings[j]  # type: ignore[attr-defined]
+        diff = np.abs(np.mod(float(heading_deg) - row + 180.0, 360.0) - 180.0)
+        return int(np.argmin(diff))
+
+    def lookup(self, lat_deg: float, lon_deg: float, depth_m: float, heading_deg: float) -> Lookup:
+        """The action for a position and compass heading, in constant time."""
+        cell = self.locate(lat_deg, lon_deg, depth_m)
+        if cell is None:
+            return Lookup(Action.UNREACHABLE, "outside_grid", None)
+        l, j, i = cell
+        k = self.heading_index(j, heading_deg) if math.isfinite(heading_deg) else 0
+        state = (l, j, i, k)
+        if not self.water[l, j, i]:
+            return Lookup(Action.UNREACHABLE, "land", state)
+        action = Action(int(self.actions[state]))
+        if action == Action.AT_GOAL:
+            return Lookup(action, "at_goal", state)
+        if action == Action.UNREACHABLE:
+            return Lookup(action, "unreachable", state)
+        return Lookup(action, "ok", state)
+
+    # -- identity -------------------------------------------------------------------
+    def header(self) -> dict[str, Any]:
+        """The JSON header, as documented in docs/policy-table.md."""
+        return {
+            "grid": {
+                "lon0_deg": self.lon0_deg,
+                "lat0_deg": self.lat0_deg,
+                "dlon_deg": self.dlon_deg,
+                "dlat_deg": self.dlat_deg,
+                "nx": self.nx,
+                "ny": self.ny,
+                "depth_m": list(self.depth_m),
+            },
+            "headings": {"count": N_HEADINGS, "convention": "grid-k-ccw-from-east"},
+            "goal": {
+                "lon_deg": self.goal_lon_deg,
+                "lat_deg": self.goal_lat_deg,
+                "depth_m": self.goal_depth_m,
+                "radius_cells": self.goal_radius_cells,
+            },
+            "model": self.model,
+            "criterion": self.criterion,
+            "uncertainty": self.uncertainty,
+            "costs": dict(self.costs),
+            "forecast": {
+                "source": self.forecast_source,
+                "identity": self.forecast_identity,
+                "time": self.forecast_time,
+            },
+            "planner_version": self.planner_version,
+        }
+
+    # -- bytes ----------------------------------------------------------------------
+    def to_bytes(self, *, compress: bool = True) -> bytes:
+        """Serialise: preamble, JSON header, 1-bit water mask + 4-bit actions, CRC32."""
+        header = json.dumps(self.header(), sort_keys=True, separators=(",", ":")).encode("utf-8")
+        raw = _pack_payload(self.water, self.actions)
+        stored = zlib.compress(raw, 9) if compress else raw
+        body = b"".join(
+            [
+                _PREAMBLE.pack(MAGIC, FORMAT_VERSION, FLAG_ZLIB if compress else 0, len(header)),
+                header,
+                _PAYLOAD.pack(len(stored), len(raw)),
+                stored,
+            ]
+        )
+        return body + _CRC.pack(zlib.crc32(body))
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, name: str = "table") -> PolicyTable:
+        """Parse and check a table; raise TableError saying what is wrong and where."""
+        data = bytes(data)
+        if len(data) < _PREAMBLE.size + _PAYLOAD.size + _CRC.size:
+            raise TableError(f"{name}: truncated: {len(data)} bytes is shorter than the smallest table")
+        magic, version, flags, header_len = _PREAMBLE.unpack_from(data, 0)
+        if magic != MAGIC:
+            raise TableError(f"{name}: not a policy table: magic {magic!r}, expected {MAGIC!r}")
+        if version != FORMAT_VERSION:
+            raise TableError(f"{name}: format version {version} is not supported; this reader reads version {FORMAT_VERSION}")
+        if flags & ~FLAG_ZLIB:
+            raise TableError(f"{name}: unknown flags 0x{flags:04x}")
+        pos = _PREAMBLE.size + header_len
+        if pos + _PAYLOAD.size + _CRC.size > len(data):
+            raise TableError(f"{name}: truncated: the header says {header_len} header bytes but the file has {len(data)} bytes")
+        stored_len, raw_len = _PAYLOAD.unpack_from(data, pos)
+        end = pos + _PAYLOAD.size + stored_len
+        if end + _CRC.size != len(data):
+            what = "truncated" if end + _CRC.size > len(data) else "has trailing bytes"
+            raise TableError(f"{name}: {what}: expected {end + _CRC.size} bytes from its lengths, got {len(data)}")
+        (crc,) = _CRC.unpack_from(data, end)
+        actual = zlib.crc32(data[:end])
+        if crc != actual:
+            raise TableError(f"{name}: CRC32 mismatch: stored 0x{crc:08x}, computed 0x{actual:08x}; the file is corrupt")
+        try:
+            header = json.loads(data[_PREAMBLE.size : pos].decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise TableError(f"{name}: header is not valid JSON: {exc}") from None
+        stored = data[pos + _PAYLOAD.size : end]
+        try:
+            raw = zlib.decompress(stored) if flags & FLAG_ZLIB else stored
+        except zlib.error as exc:
+            raise TableError(f"{name}: compressed payload is corrupt: {exc}") from None
+        return cls._from_parts(header, raw, raw_len, name)
+
+    @classmethod
+    def _from_parts(cls, header: dict[str, Any], raw: bytes, raw_len: int, name: str) -> PolicyTable:
+        try:
+            g = header["grid"]
+            nx, ny = _int(g["nx"], "grid.nx"), _int(g["ny"], "grid.ny")
+            depths = tuple(_float(d, "grid.depth_m") for d in g["depth_m"])
+            if header["headings"]["count"] != N_HEADINGS:
+                raise TableError(f"headings.count: expected {N_HEADINGS}; got {header['headings']['count']!r}")
+            goal = header["goal"]
+            forecast = header["forecast"]
+            kwargs = dict(
+                lon0_deg=_float(g["lon0_deg"], "grid.lon0_deg"),
+                lat0_deg=_float(g["lat0_deg"], "grid.lat0_deg"),
+                dlon_deg=_float(g["dlon_deg"], "grid.dlon_deg"),
+                dlat_deg=_float(g["dlat_deg"], "grid.dlat_deg"),
+                nx=nx,
+                ny=ny,
+                depth_m=depths,
+                goal_lon_deg=_float(goal["lon_deg"], "goal.lon_deg"),
+                goal_lat_deg=_float(goal["lat_deg"], "goal.lat_deg"),
+                goal_depth_m=_float(goal["depth_m"], "goal.depth_m"),
+                goal_radius_cells=_int(goal["radius_cells"], "goal.radius_cells"),
+                criterion=str(header["criterion"]),
+                uncertainty=str(header["uncertainty"]),
+                model=str(header["model"]),
+                costs={str(k): _int(v, f"costs.{k}") for k, v in header["costs"].items()},
+                forecast_source=str(forecast["source"]),
+                forecast_identity=str(forecast["identity"]),
+                forecast_time=None if forecast["time"] is None else str(forecast["time"]),
+                planner_version=str(header["planner_version"]),
+            )
+        except KeyError as exc:
+            raise TableError(f"{name}: header lacks the key {exc.args[0]!r}") from None
+        except (TypeError, AttributeError) as exc:
+            raise TableError(f"{name}: header has a field of the wrong type: {exc}") from None
+        except TableError as exc:
+            raise TableError(f"{name}: {exc}") from None
+        if not depths or nx < 2 or ny < 2 or kwargs["dlon_deg"] <= 0 or kwargs["dlat_deg"] <= 0:
+            raise TableError(f"{name}: grid: expected nx, ny >= 2, positive spacing and at least one depth")
+        n_cells = len(depths) * ny * nx
+        if n_cells * N_HEADINGS > MAX_STATES:
+            raise TableError(f"{name}: grid of {n_cells * N_HEADINGS} states exceeds the limit of {MAX_STATES}")
+        expected = _payload_len(n_cells)
+        if raw_len != expected or len(raw) != expected:
+            raise TableError(
+                f"{name}: payload is {len(raw)} bytes (declared {raw_len}) but the grid "
+                f"{len(depths)} x {ny} x {nx} x {N_HEADINGS} needs {expected}"
+            )
+        water, actions = _unpack_payload(raw, (len(depths), ny, nx))
+        if np.any(actions > Action.UNREACHABLE):
+            raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} in the payload")
+        if np.any(actions[~water] != Action.UNREACHABLE):
+            raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
+        return cls(actions=actions, water=water, **kwargs)
+
+    def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> Path:
+        """Write atomically: a temporary file in the same folder, then rename."""
+        return write_atomic(path, self.to_bytes(compress=compress))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> PolicyTable:
+        """Read and check a table file."""
+        p = Path(path)
+        try:
+            data = p.read_bytes()
+        except OSError as exc:
+            raise TableError(f"{p}: cannot read: {exc.strerror}") from None
+        return cls.from_bytes(data, name=str(p))
+
+    @property
+    def crc32(self) -> int:
+        """CRC32 of the compressed serialisation: the table's identity in logs."""
+        return int.from_bytes(self.to_bytes()[-4:], "little")
+
+    def matches(self, other: PolicyTable) -> list[str]:
+        """Fields that differ from another table's grid or goal (empty when compatible)."""
+        mine, theirs = self.header(), other.header()
+        return [key for key in ("grid", "goal") if mine[key] != theirs[key]]
+
+
+def write_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
+    """Write bytes to ``path`` via a temporary file and ``os.replace``: never half-written."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return target
+
+
+def _payload_len(n_cells: int) -> int:
+    return (n_cells + 7) // 8 + (n_cells * N_HEADINGS + 1) // 2
+
+
+def _pack_payload(water: NDArray[np.bool_], actions: NDArray[np.uint8]) -> bytes:
+    """Water bits (little bit order, [l, j, i]) then actions, two per byte, low nibble first."""
+    mask = np.packbits(np.ascontiguousarray(water).ravel(), bitorder="little")
+    flat = np.ascontiguousarray(actions).ravel().astype(np.uint8)
+    if flat.size % 2:
+        flat = np.concatenate([flat, np.zeros(1, dtype=np.uint8)])
+    nibbles = (flat[0::2] & 0x0F) | ((flat[1::2] & 0x0F) << 4)
+    return mask.tobytes() + nibbles.astype(np.uint8).tobytes()
+
+
+def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int]) -> tuple[NDArray[np.bool_], NDArray[np.uint8]]:
+    n_cells = int(np.prod(cell_shape))
+    n_mask = (n_cells + 7) // 8
+    buf = np.frombuffer(raw, dtype=np.uint8)
+    water = np.unpackbits(buf[:n_mask], bitorder="little")[:n_cells].astype(bool).reshape(cell_shape)
+    packed = buf[n_mask:]
+    actions = np.empty(packed.size * 2, dtype=np.uint8)
+    actions[0::2] = packed & 0x0F
+    actions[1::2] = packed >> 4
+    return water, actions[: n_cells * N_HEADINGS].reshape(cell_shape + (N_HEADINGS,))
+
+
+def _float(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise TableError(f"{key}: expected a finite number; got {value!r}")
+    return float(value)
+
+
+def _int(value: Any, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TableError(f"{key}: expected an integer; got {value!r}")
+    return value
