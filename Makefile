@@ -1,0 +1,38 @@
+# Set-up is part of every target: `make demo` and `make test` work on a fresh machine.
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+LRAUV  := $(VENV)/bin/lrauv
+STAMP  := $(VENV)/.installed
+OUT    ?= out/demo
+
+.PHONY: demo test bench clean sysdeps
+
+# System packages: a Python >= 3.11 with venv and pip (Debian: python3-venv).
+sysdeps:
+	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), "Python >= 3.11 is required, found " + sys.version' \
+	  || { echo "install Python 3.11 or newer"; exit 1; }
+	@$(PYTHON) -c 'import venv, ensurepip' 2>/dev/null || { \
+	  echo "installing python3-venv (Debian)"; \
+	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y -qq python3-venv; \
+	  else sudo apt-get update -qq && sudo apt-get install -y -qq python3-venv; fi; }
+
+$(STAMP): pyproject.toml | sysdeps
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(LRAUV) forecast synth $(OUT)/forecast.nc
+	$(LRAUV) plan missions/demo.yaml --forecast $(OUT)/forecast.nc --out $(OUT)/demo.lrpt \
+	  --export-values $(OUT)/values.npz --plot $(OUT)/pictures
+
+test: $(STAMP)
+	$(PY) -m pytest
+
+bench: $(STAMP)
+	$(PY) bench/bench_plan.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache
