@@ -152,7 +152,9 @@ def _counts(settings: SyntheticSettings) -> tuple[int, int]:
 def _axes(settings: SyntheticSettings) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Longitudes ``(nx,)`` and latitudes ``(ny,)``, points on the box edges (spec section 1)."""
     nx, ny = _counts(settings)
-    return np.linspace(settings.west_deg, settings.east_deg, nx), np.linspace(settings.south_deg, settings.north_deg, ny)
+    lon = np.linspace(settings.west_deg, settings.east_deg, nx)
+    lat = np.linspace(settings.south_deg, settings.north_deg, ny)
+    return lon, lat
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -161,7 +163,16 @@ class SyntheticSettings:
 
     Grid: points on the box edges, ``linspace(west, east, nx)`` with
     ``nx = round((east - west) / spacing_deg) + 1`` (so about ``spacing_deg``
-    apart; spec section 1). Times: ``hours + 1`` hourly steps from the issue time.
+    apart; spec section 1); the defaults give the paper's box, 57 x 41 points.
+    Times: ``hours + 1`` hourly steps, hour 0 at the issue time.
+
+    Random draws come from ``numpy.random.default_rng(seed)``; eddy centres are
+    drawn inside the box, so the box is part of the scenario (the coast,
+    bathymetry and everything else are fixed functions of longitude and latitude).
+    Speed defaults are chosen so that over water the median speed is about
+    0.07..0.10 m/s and the maximum stays under ``max_speed_m_s`` almost
+    everywhere before clipping (eddies 0.12..0.28 m/s at their radius, shelf
+    jet 0.12 m/s poleward, background 0.08 m/s equatorward, tides 0.06 + 0.03 m/s).
     """
 
     seed: int = 0
@@ -182,12 +193,12 @@ class SyntheticSettings:
     # Shelf current, background and tide (alongshore; positive = equatorward, towards the south-east).
     shelf_speed_m_s: float = -0.12
     shelf_jet_km: float = 3.0
-    background_speed_m_s: float = 0.07
+    background_speed_m_s: float = 0.08
     tide_m2_m_s: float = 0.06
     tide_k1_m_s: float = 0.03
     # Submesoscale plane waves.
     n_waves: int = 6
-    wave_speed_m_s: float = 0.025
+    wave_speed_m_s: float = 0.03
     # Vertical structure.
     depth_efold_m: float = 20.0
     veer_deg_per_m: float = 1.5
@@ -199,13 +210,20 @@ class SyntheticSettings:
     shoal_lon_deg: float = -118.10
     shoal_lat_deg: float = 33.50
     shoal_crest_m: float | None = 8.0
-    shoal_radius_km: float = 1.5
+    shoal_radius_km: float = 2.5
     # Forecast issues.
     error_scale: float = 0.3
     error_decay: float = 0.5
     issue_interval_h: float = 6.0
 
     def __post_init__(self) -> None:
+        # Tuples of floats, so that settings stay hashable (scenes are cached per settings).
+        for name in ("depths_m", "eddy_radius_km", "eddy_speed_m_s"):
+            value = getattr(self, name)
+            _check(np.ndim(value) == 1, name, "a sequence of numbers", value)
+            object.__setattr__(self, name, tuple(float(x) for x in value))
+        _check(len(self.eddy_radius_km) == 2 and len(self.eddy_speed_m_s) == 2,
+               "eddy_radius_km and eddy_speed_m_s", "(min, max) pairs", (self.eddy_radius_km, self.eddy_speed_m_s))
         _check(isinstance(self.seed, int) and not isinstance(self.seed, bool) and self.seed >= 0,
                "seed", "an integer >= 0", self.seed)
         _check(isinstance(self.hours, int) and not isinstance(self.hours, bool) and self.hours >= 1,
@@ -272,12 +290,12 @@ def write_synthetic(
     """
     target = pathlib.Path(path)
     ds = synthesize(settings, issue_number=issue_number)
-    directory = target.parent if str(target.parent) else pathlib.Path(".")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     os.close(fd)
     tmp = pathlib.Path(tmp_name)
     try:
-        ds.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=_encoding(ds))
+        ds_file = _with_numeric_time(ds)
+        ds_file.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=_encoding(ds_file))
         with open(tmp, "rb") as handle:
             os.fsync(handle.fileno())
         os.chmod(tmp, 0o644)
@@ -306,8 +324,7 @@ def current_at(
     """
     n = _check_issue(issue_number)
     arrays = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (t_s, lon_deg, lat_deg, depth_m)))
-    t, lon, lat, depth = (np.array(a) for a in arrays)
-    return _sample(settings, n, t, lon, lat, depth)
+    return _sample(settings, n, *arrays)
 
 
 def bottom_depth_m(settings: SyntheticSettings, lon_deg: ArrayLike, lat_deg: ArrayLike) -> NDArray[np.float64]:
@@ -317,7 +334,7 @@ def bottom_depth_m(settings: SyntheticSettings, lon_deg: ArrayLike, lat_deg: Arr
 
 
 def issue_datetime(settings: SyntheticSettings, *, issue_number: int | None) -> dt.datetime:
-    """Issue time (UTC, aware) of issue ``n``: ``issue_time + n * issue_interval_h``; the truth starts at ``issue_time``."""
+    """Issue time (UTC, aware) of issue ``n``, ``issue_time + n * issue_interval_h``; the truth's is ``issue_time``."""
     n = _check_issue(issue_number)
     return _parse_time(settings.issue_time) + dt.timedelta(hours=_issue_offset_h(settings, n))
 
@@ -327,7 +344,10 @@ def issue_datetime(settings: SyntheticSettings, *, issue_number: int | None) -> 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
 class _Scene:
-    """Random parameters of one field; arrays are per eddy ``(n_eddies,)`` or per wave ``(n_waves,)``."""
+    """Random parameters of one field; arrays are per eddy ``(n_eddies,)`` or per wave ``(n_waves,)``.
+
+    Scenes are cached, so their arrays are made read-only.
+    """
 
     eddy_x_km: NDArray[np.float64]
     eddy_y_km: NDArray[np.float64]
@@ -349,6 +369,13 @@ class _Scene:
     k1_m_s: float
     k1_phase: float
 
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if isinstance(value, np.ndarray):
+                frozen = np.array(value, dtype=np.float64)
+                frozen.setflags(write=False)
+                object.__setattr__(self, name, frozen)
+
 
 @dataclass(frozen=True, eq=False, kw_only=True)
 class _Coast:
@@ -362,6 +389,7 @@ class _Coast:
     bottom_m: NDArray[np.float64]
 
 
+@functools.lru_cache(maxsize=64)
 def _truth_scene(settings: SyntheticSettings) -> _Scene:
     """The truth's parameters, drawn from ``default_rng(seed)`` in a fixed order."""
     rng = np.random.default_rng(settings.seed)
@@ -406,6 +434,7 @@ def _truth_scene(settings: SyntheticSettings) -> _Scene:
     )
 
 
+@functools.lru_cache(maxsize=64)
 def _forecast_scene(settings: SyntheticSettings, issue_number: int) -> _Scene:
     """The truth's scene with errors of relative size ``error_scale * error_decay**n``.
 
@@ -467,16 +496,19 @@ def _coast_geometry(settings: SyntheticSettings, lon: NDArray[np.float64], lat: 
     x_km = (lon - _REF_LON_DEG) * _KM_PER_DEG_LON
     y_km = (lat - _REF_LAT_DEG) * _KM_PER_DEG_LAT
 
-    # Bathymetry: slope at the coast grows linearly from north-west to south-east,
-    # saturating at the basin depth offshore.
+    # Bathymetry: slope at the coast grows linearly in longitude from Seal Beach
+    # (-118.10) to Dana Point (-117.70), saturating at the basin depth offshore.
     frac = np.clip((lon - (-118.10)) / (-117.70 - (-118.10)), 0.0, 1.0)
-    slope = settings.shelf_slope_nw_m_per_km + frac * (settings.shelf_slope_se_m_per_km - settings.shelf_slope_nw_m_per_km)
+    slope_nw, slope_se = settings.shelf_slope_nw_m_per_km, settings.shelf_slope_se_m_per_km
+    slope = slope_nw + frac * (slope_se - slope_nw)
     h_basin = settings.basin_depth_m
     bottom = h_basin * -np.expm1(-slope * offshore / h_basin)
     if settings.shoal_crest_m is not None:
         sx = (lon - settings.shoal_lon_deg) * _KM_PER_DEG_LON
         sy = (lat - settings.shoal_lat_deg) * _KM_PER_DEG_LAT
-        g = np.exp(-(sx * sx + sy * sy) / (2.0 * settings.shoal_radius_km**2))
+        # Flat-topped shoal: g = exp(-(r/R)^4) keeps the top near the crest depth out to about R/2.
+        q = (sx * sx + sy * sy) / settings.shoal_radius_km**2
+        g = np.exp(-q * q)
         crest = settings.shoal_crest_m
         bottom = np.where(bottom > crest, bottom - (bottom - crest) * g, bottom)
     return _Coast(x_km=x_km, y_km=y_km, offshore_km=offshore, along_x=1.0 / norm, along_y=m / norm, bottom_m=bottom)
@@ -559,11 +591,15 @@ def _sample(
     return _clip(u, v, settings.max_speed_m_s)
 
 
-def _clip(u: NDArray[np.float64], v: NDArray[np.float64], limit: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _clip(
+    u: NDArray[np.float64], v: NDArray[np.float64], limit: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Scale vectors faster than ``limit`` down to ``limit``; NaN stays NaN."""
+    # Aim a hair below the limit so that float32 rounding cannot push a speed over it.
+    target = limit * (1.0 - 1e-6)
     speed = np.hypot(u, v)
     with np.errstate(invalid="ignore", divide="ignore"):
-        factor = np.where(speed > limit, limit / speed, 1.0)
+        factor = np.where(speed > target, target / speed, 1.0)
     return u * factor, v * factor
 
 
@@ -585,8 +621,8 @@ def _error_gain(settings: SyntheticSettings, issue_number: int) -> float:
     uf, vf = _raw_field(settings, _forecast_scene(settings, issue_number), *args)
     truth_ms = float(np.nanmean(ut * ut + vt * vt))
     error_ms = float(np.nanmean((uf - ut) ** 2 + (vf - vt) ** 2))
-    if target == 0.0 or error_ms == 0.0:
-        return 0.0
+    if target == 0.0 or not (np.isfinite(error_ms) and error_ms > 0.0):
+        return 0.0  # no error asked for, or no water to measure it on
     return float(target * np.sqrt(truth_ms / error_ms))
 
 
@@ -608,7 +644,7 @@ def _dataset(
     origin = issued.replace(tzinfo=None)
     times = np.datetime64(origin, "ns") + (hours * 3600.0).astype("timedelta64[s]").astype("timedelta64[ns]")
     dims = ("time", "depth", "lat", "lon")
-    speed_kind = "truth" if issue_number is None else f"forecast issue {issue_number}"
+    kind = "truth" if issue_number is None else f"forecast issue {issue_number}"
     u_attrs = {"standard_name": "eastward_sea_water_velocity", "long_name": "eastward current", "units": "m s-1"}
     v_attrs = {"standard_name": "northward_sea_water_velocity", "long_name": "northward current", "units": "m s-1"}
     geo = _coast_geometry(settings, *np.broadcast_arrays(lon[None, :], lat[:, None]))
@@ -616,10 +652,10 @@ def _dataset(
         data_vars={
             "u": (dims, u, u_attrs),
             "v": (dims, v, v_attrs),
-            "h": (("lat", "lon"), geo.bottom_m.astype(np.float32), {
+            "h": (("lat", "lon"), np.where(geo.bottom_m > 0.0, geo.bottom_m, np.nan).astype(np.float32), {
                 "standard_name": "sea_floor_depth_below_sea_surface",
-                "long_name": "synthetic bathymetry (negative on land)",
-                "units": "m", "positive": "down",
+                "long_name": "synthetic bathymetry; a cell is land at layers no shallower than this",
+                "units": "m",
             }),
         },
         coords={
@@ -631,7 +667,7 @@ def _dataset(
             "lon": ("lon", lon, {"standard_name": "longitude", "long_name": "longitude",
                                  "units": "degrees_east", "axis": "X"}),
         },
-        attrs=_global_attrs(settings, issue_number, issued, speed_kind),
+        attrs=_global_attrs(settings, issue_number, issued, kind),
     )
     ds["time"].encoding.update({"units": f"hours since {origin:%Y-%m-%d %H:%M:%S}", "calendar": "standard",
                                 "dtype": "float64"})
@@ -686,9 +722,22 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
     return {
         "u": dict(velocity),
         "v": dict(velocity),
-        "h": {"dtype": "float32", "_FillValue": None},
+        "h": {"dtype": "float32", "_FillValue": np.float32(np.nan)},
         "lat": {"_FillValue": None},
         "lon": {"_FillValue": None},
         "depth": {"_FillValue": None},
-        "time": {"_FillValue": None},
+        "time": {"dtype": "float64", "_FillValue": None},
     }
+
+
+def _with_numeric_time(ds: xr.Dataset) -> xr.Dataset:
+    """The time axis as float hours with its CF units and calendar as attributes.
+
+    xarray would otherwise rewrite ``hours since 2026-01-15 00:00:00`` as
+    ``hours since 2026-01-15``; both are CF, but the file should say the issue time in full.
+    """
+    units = ds["time"].encoding["units"]
+    origin = np.datetime64(dt.datetime.strptime(units.removeprefix("hours since "), "%Y-%m-%d %H:%M:%S"), "ns")
+    hours = (ds["time"].values - origin) / np.timedelta64(1, "h")
+    attrs = {**ds["time"].attrs, "units": units, "calendar": ds["time"].encoding["calendar"]}
+    return ds.assign_coords(time=("time", hours.astype(np.float64), attrs))

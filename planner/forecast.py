@@ -1,0 +1,1720 @@
+"""Ocean current forecasts: reading netCDF files and resampling them onto the planning grid.
+
+This is the only module of the project that reads netCDF (xarray and netCDF4; pyproj is
+imported lazily, only for projected grids). ``open_forecast`` turns a file into a
+``Forecast`` whose velocities are eastward/northward m/s with NaN for land (spec section 1:
+"Products that store grid-relative components ... are rotated to east/north when they are
+read"). ``resample`` puts a forecast time step onto a planning ``Grid`` exactly as spec
+section 1 prescribes.
+
+Supported layouts:
+
+- regular lon/lat products (HYCOM/RTOFS ``water_u``, Copernicus ``uo``, any CF
+  ``eastward_sea_water_velocity``), 1-D coordinates, optional depth axis;
+- projected or curvilinear structured grids (ROMS output interpolated to z-levels, e.g.
+  NorKyst-800): x/y components rotated with the CF ``grid_mapping`` (or an ``angle``
+  variable), lon/lat read from the file or computed from X/Y with the projection;
+- ROMS and CROCO native C-grid output: u/v averaged to rho points, land masks applied,
+  rotated by ``angle``, s-levels converted to per-column depths.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from planner.errors import ForecastError, GridError
+from planner.grid import Grid
+
+# --------------------------------------------------------------------------------------
+# The Forecast value
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Forecast:
+    """A current forecast, eastward/northward m/s, NaN = land (spec section 1).
+
+    Velocity arrays are ``(T, Z, Y, X)``. Regular grids have 1-D ``lon_deg`` (X,) and
+    ``lat_deg`` (Y,), both strictly increasing; curvilinear and projected grids have 2-D
+    ``lon_deg``/``lat_deg`` (Y, X). ``depth_m`` is None (no depth axis: the field applies to
+    every layer, Z = 1), (Z,) fixed levels (positive down, strictly increasing), or
+    (T, Z, Y, X) per-column depths of terrain-following levels, shallowest level first.
+    """
+
+    source: str
+    identity: str
+    time_s: NDArray[np.float64]
+    time_origin: str | None
+    lon_deg: NDArray[np.float64]
+    lat_deg: NDArray[np.float64]
+    depth_m: NDArray[np.float64] | None
+    u_east_m_s: NDArray[np.float64]
+    v_north_m_s: NDArray[np.float64]
+    notes: tuple[str, ...] = ()
+    # Names of the file's two velocity variables, for `describe`.
+    variables: tuple[str, ...] = ()
+    # True: a layer shallower than the first level takes that level's value (spec section 1).
+    # False when the first level is not the model's top level (CROCO files that keep only the
+    # bottom s-levels): depths above the first level are not covered and count as land.
+    covers_surface: bool = True
+
+    def __post_init__(self) -> None:
+        src = self.source
+        time_s = _frozen(self.time_s)
+        u = _frozen(self.u_east_m_s)
+        v = _frozen(self.v_north_m_s)
+        lon = _frozen(self.lon_deg)
+        lat = _frozen(self.lat_deg)
+        depth = None if self.depth_m is None else _frozen(self.depth_m)
+        if time_s.ndim != 1 or time_s.size < 1 or not np.all(np.isfinite(time_s)):
+            raise ForecastError(f"{src}: time_s: expected a 1-D array of finite seconds; got shape {time_s.shape}")
+        if time_s.size > 1 and np.any(np.diff(time_s) <= 0):
+            raise ForecastError(f"{src}: time_s: expected strictly increasing times; got {time_s.tolist()[:6]}...")
+        if u.ndim != 4 or u.shape != v.shape:
+            raise ForecastError(
+                f"{src}: u/v: expected two arrays of the same shape (T, Z, Y, X); got {u.shape} and {v.shape}"
+            )
+        n_t, n_z, n_y, n_x = u.shape
+        if n_t != time_s.size:
+            raise ForecastError(f"{src}: u/v have {n_t} time steps but time_s has {time_s.size}")
+        if lon.ndim == 1 and lat.ndim == 1:
+            if lon.shape != (n_x,) or lat.shape != (n_y,):
+                raise ForecastError(
+                    f"{src}: lon/lat: expected shapes ({n_x},) and ({n_y},) to match u/v {u.shape}; "
+                    f"got {lon.shape} and {lat.shape}"
+                )
+            for name, axis in (("lon_deg", lon), ("lat_deg", lat)):
+                if not np.all(np.isfinite(axis)) or (axis.size > 1 and np.any(np.diff(axis) <= 0)):
+                    raise ForecastError(f"{src}: {name}: expected finite, strictly increasing values")
+        elif lon.ndim == 2 and lat.ndim == 2:
+            if lon.shape != (n_y, n_x) or lat.shape != (n_y, n_x):
+                raise ForecastError(
+                    f"{src}: 2-D lon/lat: expected shape ({n_y}, {n_x}) to match u/v {u.shape}; "
+                    f"got {lon.shape} and {lat.shape}"
+                )
+        else:
+            raise ForecastError(f"{src}: lon/lat: expected both 1-D or both 2-D; got {lon.ndim}-D and {lat.ndim}-D")
+        if depth is None:
+            if n_z != 1:
+                raise ForecastError(f"{src}: depth_m is None (no depth axis) but u/v have {n_z} levels; expected 1")
+        elif depth.ndim == 1:
+            if depth.shape != (n_z,) or not np.all(np.isfinite(depth)) or np.any(np.diff(depth) <= 0):
+                raise ForecastError(
+                    f"{src}: depth_m: expected {n_z} finite levels, positive down, strictly increasing; "
+                    f"got {depth.tolist()[:12]}"
+                )
+        elif depth.shape != u.shape:
+            raise ForecastError(f"{src}: per-column depth_m: expected shape {u.shape}; got {depth.shape}")
+        if self.time_origin is not None:
+            _parse_origin(self.time_origin, src)
+        arrays = {"time_s": time_s, "u_east_m_s": u, "v_north_m_s": v, "lon_deg": lon, "lat_deg": lat}
+        for name, arr in arrays.items():
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "depth_m", depth)
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        object.__setattr__(self, "variables", tuple(str(n) for n in self.variables))
+
+    @property
+    def n_times(self) -> int:
+        return int(self.u_east_m_s.shape[0])
+
+    @property
+    def n_levels(self) -> int:
+        return int(self.u_east_m_s.shape[1])
+
+    @property
+    def shape(self) -> tuple[int, int, int, int]:
+        """``(T, Z, Y, X)``."""
+        t, z, y, x = self.u_east_m_s.shape
+        return (int(t), int(z), int(y), int(x))
+
+    @property
+    def is_regular(self) -> bool:
+        """True for 1-D lon/lat axes (separable interpolation, spec section 1)."""
+        return self.lon_deg.ndim == 1
+
+    @property
+    def has_per_column_depth(self) -> bool:
+        return self.depth_m is not None and self.depth_m.ndim == 4
+
+    @property
+    def times(self) -> NDArray[np.datetime64] | None:
+        """Time steps as ``datetime64[ms]`` (UTC), or None when the file gives no reference date."""
+        if self.time_origin is None:
+            return None
+        origin = _parse_origin(self.time_origin, self.source)
+        return origin + np.round(self.time_s * 1000.0).astype("timedelta64[ms]")
+
+
+def _frozen(a: Any) -> NDArray[np.float64]:
+    arr = np.array(a, dtype=np.float64)  # always a copy, so the caller's array cannot change ours
+    arr.setflags(write=False)
+    return arr
+
+
+def _parse_origin(origin: str, src: str) -> np.datetime64:
+    text = origin.strip()
+    if text.endswith("Z"):
+        text = text[:-1]
+    try:
+        return np.datetime64(text, "ms")
+    except ValueError as exc:
+        raise ForecastError(
+            f"{src}: time_origin: expected an ISO-8601 UTC time such as '2023-02-25T12:00:00Z'; got {origin!r}"
+        ) from exc
+
+
+# --------------------------------------------------------------------------------------
+# Vocabulary: which variables are currents, which coordinates are which
+# --------------------------------------------------------------------------------------
+
+# CF standard names of east/north components (spec section 1: velocities must be east/north).
+_EAST_NORTH_STANDARD_NAMES = (
+    ("eastward_sea_water_velocity", "northward_sea_water_velocity"),
+    ("surface_eastward_sea_water_velocity", "surface_northward_sea_water_velocity"),
+    ("eastward_sea_water_velocity_assuming_no_tide", "northward_sea_water_velocity_assuming_no_tide"),
+    ("baroclinic_eastward_sea_water_velocity", "baroclinic_northward_sea_water_velocity"),
+    ("barotropic_eastward_sea_water_velocity", "barotropic_northward_sea_water_velocity"),
+)
+# Grid-relative components (ROMS xi/eta, projection X/Y): rotated when read.
+_GRID_XY_STANDARD_NAMES = (
+    ("x_sea_water_velocity", "y_sea_water_velocity"),
+    ("sea_water_x_velocity", "sea_water_y_velocity"),
+    ("sea_water_x_velocity_at_u_location", "sea_water_y_velocity_at_v_location"),
+    ("sea_water_surface_x_velocity", "sea_water_surface_y_velocity"),
+    ("surface_sea_water_x_velocity", "surface_sea_water_y_velocity"),
+)
+# Common variable names, tried when no standard_name matches.
+_COMMON_NAMES = (
+    ("water_u", "water_v"),
+    ("uo", "vo"),
+    ("u_eastward", "v_northward"),
+    ("ucur", "vcur"),
+    ("u", "v"),
+    ("U", "V"),
+    ("u_sur", "v_sur"),
+)
+
+_TIME_NAMES = {"time", "t", "ocean_time", "time_counter", "valid_time", "times", "mt", "scrum_time"}
+_DEPTH_NAMES = {"depth", "z", "lev", "level", "levels", "deptht", "depthu", "depthv", "zlev", "depth_below_surface"}
+_S_NAMES = {"s_rho", "s_w", "sigma", "s"}
+_LAT_NAMES = {"lat", "latitude", "nav_lat", "lat_rho", "y_lat", "lats"}
+_LON_NAMES = {"lon", "longitude", "nav_lon", "lon_rho", "x_lon", "long", "lons"}
+_Y_NAMES = {"y", "yc", "eta", "eta_rho", "eta_u", "eta_v", "j", "ny", "rlat", "nj"}
+_X_NAMES = {"x", "xc", "xi", "xi_rho", "xi_u", "xi_v", "i", "nx", "rlon", "ni"}
+
+_DEG_EAST = {"degrees_east", "degree_east", "degree_e", "degrees_e", "degreee", "degreese"}
+_DEG_NORTH = {"degrees_north", "degree_north", "degree_n", "degrees_n", "degreen", "degreesn"}
+
+_TIME_UNIT_S = {
+    "s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0,
+    "min": 60.0, "mins": 60.0, "minute": 60.0, "minutes": 60.0,
+    "h": 3600.0, "hr": 3600.0, "hrs": 3600.0, "hour": 3600.0, "hours": 3600.0,
+    "d": 86400.0, "day": 86400.0, "days": 86400.0,
+}  # fmt: skip
+_STANDARD_CALENDARS = {"", "standard", "gregorian", "proleptic_gregorian"}
+
+# Finite values beyond this are undeclared fill (no ocean current is 1 km/s).
+_MAX_PLAUSIBLE_SPEED_M_S = 1000.0
+# Barycentric weights below this are exactly zero (brief for spec section 1, curvilinear grids).
+_BARY_SNAP = 1e-9
+# Coordinates within this many float32 ulps (at the axis' largest magnitude) of a source node
+# are that node (spec section 1: "coordinates stored as float32 count as equal"). Real products
+# store float32 axes computed as start + i * step in float32 (HYCOM lon is off by up to 6.7 ulps
+# of 125.9 deg, Copernicus lon by 1e-5 deg near 0 deg), so the ulp is taken at the axis' scale,
+# never more than a thousandth of the axis spacing.
+_SNAP_ULPS = 8.0
+_SNAP_MAX_FRACTION_OF_SPACING = 1e-3
+
+
+# What netCDF4/xarray/pyproj raise on damaged or unexpected files; wrapped into ForecastError.
+_LIBRARY_ERRORS = (OSError, ValueError, KeyError, TypeError, RuntimeError, IndexError, AttributeError, ArithmeticError)
+
+
+def _attr(var: xr.DataArray | xr.Variable, key: str) -> str:
+    value = var.attrs.get(key, "")
+    return value.strip() if isinstance(value, str) else str(value)
+
+
+def _norm_units(units: str) -> str:
+    return units.strip().lower().replace(" ", "").replace("_", "")
+
+
+def _is_lon_like(name: str, var: xr.DataArray | xr.Variable) -> bool:
+    std = _attr(var, "standard_name").lower()
+    if std == "longitude":
+        return True
+    units = _norm_units(_attr(var, "units"))
+    if units in {u.replace("_", "") for u in _DEG_EAST}:
+        return True
+    if std or units:
+        return False
+    return name.lower() in _LON_NAMES
+
+
+def _is_lat_like(name: str, var: xr.DataArray | xr.Variable) -> bool:
+    std = _attr(var, "standard_name").lower()
+    if std == "latitude":
+        return True
+    units = _norm_units(_attr(var, "units"))
+    if units in {u.replace("_", "") for u in _DEG_NORTH}:
+        return True
+    if std or units:
+        return False
+    return name.lower() in _LAT_NAMES
+
+
+def _dim_role(ds: xr.Dataset, dim: str) -> str | None:
+    """'T', 'Z', 'S' (terrain-following), 'Y', 'X' or None, from the dimension's coordinate variable or name."""
+    name = dim.lower()
+    if dim in ds.variables and ds.variables[dim].ndim == 1:
+        var = ds.variables[dim]
+        axis = _attr(var, "axis").upper()
+        std = _attr(var, "standard_name").lower()
+        units = _attr(var, "units").lower()
+        if std.startswith("ocean_s_coordinate") or std.startswith("ocean_sigma") or name in _S_NAMES:
+            return "S"
+        if axis in {"T", "Z", "Y", "X"}:
+            return axis
+        if std == "time" or " since " in f" {units} ":
+            return "T"
+        if std in {"depth", "height", "altitude"} or _attr(var, "positive").lower() in {"up", "down"}:
+            return "Z"
+        if std in {"latitude", "projection_y_coordinate", "grid_latitude"} or _is_lat_like(dim, var):
+            return "Y"
+        if std in {"longitude", "projection_x_coordinate", "grid_longitude"} or _is_lon_like(dim, var):
+            return "X"
+    if name in _TIME_NAMES or name.startswith("time"):
+        return "T"
+    if name in _S_NAMES:
+        return "S"
+    if name in _DEPTH_NAMES:
+        return "Z"
+    if name in _LAT_NAMES or name in _Y_NAMES or name.startswith("eta_"):
+        return "Y"
+    if name in _LON_NAMES or name in _X_NAMES or name.startswith("xi_"):
+        return "X"
+    return None
+
+
+# --------------------------------------------------------------------------------------
+# Opening files
+# --------------------------------------------------------------------------------------
+
+
+def _file_identity(path: Path, label: str) -> str:
+    """``sha256:`` + the first 16 hex characters of the SHA-256 of the file's bytes."""
+    digest = hashlib.sha256()
+    try:
+        with path.open("rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as exc:
+        raise ForecastError(
+            f"{label}: cannot read the file ({exc.strerror or exc}); check the path and permissions"
+        ) from exc
+    return "sha256:" + digest.hexdigest()[:16]
+
+
+def _open_dataset(path: str | os.PathLike[str], what: str) -> tuple[xr.Dataset, str, Path]:
+    label = os.fspath(path)
+    p = Path(label)
+    if not p.exists():
+        raise ForecastError(f"{label}: {what} not found; check the path")
+    if not p.is_file():
+        raise ForecastError(f"{label}: {what} is not a regular file; expected a netCDF file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # xarray's SerializationWarnings about odd encodings
+            ds = xr.open_dataset(
+                p,
+                engine="netcdf4",
+                decode_times=False,
+                decode_timedelta=False,
+                decode_coords=False,
+                mask_and_scale=True,  # CF fill -> NaN (land, spec section 1); never fillna(0)
+            )
+    except (OSError, ValueError, KeyError, TypeError, RuntimeError, IndexError) as exc:
+        raise ForecastError(
+            f"{label}: cannot open {what} as netCDF ({type(exc).__name__}: {exc}); expected a netCDF-3 or "
+            "netCDF-4 file of ocean currents"
+        ) from exc
+    return ds, label, p
+
+
+def open_forecast(
+    path: str | os.PathLike[str],
+    *,
+    variables: tuple[str, str] | None = None,
+    grid_file: str | os.PathLike[str] | None = None,
+) -> Forecast:
+    """Read a current forecast file into a ``Forecast`` (east/north m/s, NaN = land; spec section 1).
+
+    ``variables`` names the (u, v) variables when they cannot be found by CF standard name or
+    common name. ``grid_file`` supplies what a ROMS/CROCO output file lacks (lon/lat, masks,
+    h, angle). Every failure raises ``ForecastError`` naming the file and what to do.
+    """
+    label = os.fspath(path)
+    if variables is not None:
+        if (
+            not isinstance(variables, (tuple, list))
+            or len(variables) != 2
+            or not all(isinstance(n, str) and n for n in variables)
+        ):
+            raise ForecastError(f"{label}: variables: expected two variable names (U, V); got {variables!r}")
+    ds, label, p = _open_dataset(path, "forecast file")
+    grid_ds: xr.Dataset | None = None
+    grid_label: str | None = None
+    try:
+        identity = _file_identity(p, label)
+        if grid_file is not None:
+            grid_ds, grid_label, _ = _open_dataset(grid_file, "grid file")
+        ctx = _Context(ds=ds, label=label, grid_ds=grid_ds, grid_label=grid_label)
+        return _load(ctx, identity, variables)
+    except ForecastError:
+        raise
+    except GridError as exc:
+        raise ForecastError(f"{label}: {exc}") from exc
+    except _LIBRARY_ERRORS as exc:
+        raise ForecastError(
+            f"{label}: could not read the forecast ({type(exc).__name__}: {exc}); the file may be damaged or "
+            "of an unsupported layout"
+        ) from exc
+    finally:
+        ds.close()
+        if grid_ds is not None:
+            grid_ds.close()
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Context:
+    """The open file (and optional grid file) plus a label for error messages."""
+
+    ds: xr.Dataset
+    label: str
+    grid_ds: xr.Dataset | None
+    grid_label: str | None
+
+    def find(
+        self, names: tuple[str, ...], shape: tuple[int, ...] | None = None
+    ) -> tuple[str, xr.DataArray, str] | None:
+        """First variable among ``names`` (main file, then grid file) with the given shape: (name, var, where)."""
+        for dset, where in ((self.ds, self.label), (self.grid_ds, self.grid_label)):
+            if dset is None:
+                continue
+            for name in names:
+                if name in dset.variables:
+                    var = dset[name]
+                    if shape is None or tuple(var.shape) == tuple(shape):
+                        return name, var, str(where)
+        return None
+
+    def grid_hint(self) -> str:
+        return "" if self.grid_ds is not None else "; pass --grid-file GRID.nc (grid_file=) with the model grid"
+
+
+def _load(ctx: _Context, identity: str, variables: tuple[str, str] | None) -> Forecast:
+    ds, label = ctx.ds, ctx.label
+    u_name, v_name, kind = _find_velocity_variables(ds, label, variables)
+    u_var, v_var = ds[u_name], ds[v_name]
+    notes: list[str] = [f"variables: {u_name}, {v_name}" + _describe_std_names(u_var, v_var)]
+    if _is_c_grid(ds, u_var, v_var):
+        parts = _load_c_grid(ctx, u_name, v_name, kind, notes)
+    else:
+        parts = _load_structured(ctx, u_name, v_name, kind, notes)
+    u, v = parts["u"], parts["v"]
+    finite = np.isfinite(u) & np.isfinite(v)
+    if not np.any(finite):
+        raise ForecastError(
+            f"{label}: variables {u_name}/{v_name} hold no finite current values (all missing, fill or land); "
+            "expected at least one water point; check the file or pass --variables U,V to pick other variables"
+        )
+    notes.append(f"land (NaN in u or v): {100.0 * (1.0 - finite.mean()):.1f} % of values")
+    return Forecast(
+        source=label,
+        identity=identity,
+        time_s=parts["time_s"],
+        time_origin=parts["time_origin"],
+        lon_deg=parts["lon"],
+        lat_deg=parts["lat"],
+        depth_m=parts["depth"],
+        u_east_m_s=u,
+        v_north_m_s=v,
+        notes=tuple(notes),
+        variables=(u_name, v_name),
+        covers_surface=parts.get("covers_surface", True),
+    )
+
+
+def _describe_std_names(u_var: xr.DataArray, v_var: xr.DataArray) -> str:
+    su, sv = _attr(u_var, "standard_name"), _attr(v_var, "standard_name")
+    return f" (standard_name {su} / {sv})" if su or sv else " (no standard_name)"
+
+
+def _find_velocity_variables(ds: xr.Dataset, label: str, variables: tuple[str, str] | None) -> tuple[str, str, str]:
+    """(u name, v name, kind); kind is 'east_north', 'grid_xy' or 'unknown' (named, no standard_name)."""
+    if variables is not None:
+        missing = [n for n in variables if n not in ds.data_vars]
+        if missing:
+            raise ForecastError(
+                f"{label}: variables: {', '.join(repr(m) for m in missing)} not in the file; "
+                f"expected two of its data variables, e.g. {_candidate_list(ds)}; "
+                "pass --variables U,V with names from that list"
+            )
+        u_name, v_name = variables
+        return u_name, v_name, _kind_of(ds[u_name], ds[v_name])
+    by_std: dict[str, str] = {}
+    for name, var in ds.data_vars.items():
+        std = _attr(var, "standard_name").lower()
+        if std and std not in by_std and var.ndim >= 2:
+            by_std[std] = str(name)
+    for pairs, kind in ((_EAST_NORTH_STANDARD_NAMES, "east_north"), (_GRID_XY_STANDARD_NAMES, "grid_xy")):
+        for su, sv in pairs:
+            if su in by_std and sv in by_std:
+                return by_std[su], by_std[sv], kind
+    for un, vn in _COMMON_NAMES:
+        if un in ds.data_vars and vn in ds.data_vars and ds[un].ndim >= 2 and ds[vn].ndim >= 2:
+            return un, vn, _kind_of(ds[un], ds[vn])
+    raise ForecastError(
+        f"{label}: no ocean current variables found: expected variables with standard_name "
+        "eastward_sea_water_velocity/northward_sea_water_velocity (or x_/y_sea_water_velocity with a grid "
+        "angle or projection) or common names (water_u/water_v, uo/vo, u/v); the file has "
+        f"{_candidate_list(ds)}; pass --variables U,V to name them"
+    )
+
+
+def _candidate_list(ds: xr.Dataset) -> str:
+    names = [str(n) for n, var in ds.data_vars.items() if var.ndim >= 2]
+    shown = ", ".join(names[:20]) + (", ..." if len(names) > 20 else "")
+    return f"data variables [{shown}]" if names else "no data variables with 2 or more dimensions"
+
+
+def _kind_of(u_var: xr.DataArray, v_var: xr.DataArray) -> str:
+    stds = {_attr(u_var, "standard_name").lower(), _attr(v_var, "standard_name").lower()}
+    if any(s for pair in _EAST_NORTH_STANDARD_NAMES for s in pair if s in stds):
+        return "east_north"
+    if any("_x_" in s or s.startswith("x_") or "_y_" in s or s.startswith("y_") for s in stds if s):
+        return "grid_xy"
+    return "unknown"
+
+
+def _is_c_grid(ds: xr.Dataset, u_var: xr.DataArray, v_var: xr.DataArray) -> bool:
+    """ROMS/CROCO native output: staggered u/v, eta/xi dimensions or s-coordinate levels."""
+    if u_var.ndim < 2 or v_var.ndim < 2:
+        return False
+    hu, hv = tuple(u_var.dims[-2:]), tuple(v_var.dims[-2:])
+    if hu != hv:
+        return True
+    if all(str(d).startswith(("eta_", "xi_")) for d in hu):
+        return True
+    return any(_dim_role(ds, str(d)) == "S" for d in u_var.dims)
+
+
+# --------------------------------------------------------------------------------------
+# Shared reading helpers: units, time, masking
+# --------------------------------------------------------------------------------------
+
+
+def _velocity_factor(var: xr.DataArray, name: str, label: str, notes: list[str]) -> float:
+    """Factor to m/s from the variable's units (cm/s and mm/s are converted)."""
+    raw = _attr(var, "units")
+    if not raw:
+        notes.append(f"{name} has no units attribute: assumed m/s")
+        return 1.0
+    u = raw.lower().strip()
+    for long, short in (
+        ("centimeters", "cm"), ("centimetres", "cm"), ("centimeter", "cm"), ("centimetre", "cm"),
+        ("millimeters", "mm"), ("millimetres", "mm"), ("millimeter", "mm"), ("millimetre", "mm"),
+        ("meters", "m"), ("metres", "m"), ("meter", "m"), ("metre", "m"),
+        ("seconds", "s"), ("second", "s"), ("secs", "s"), ("sec", "s"),
+    ):  # fmt: skip
+        u = u.replace(long, short)
+    u = re.sub(r"\s*per\s*", "/", u)
+    u = re.sub(r"[\s.*^]", "", u)
+    u = u.replace("s-1", "/s").replace("s**-1", "/s")
+    if u in {"m/s", "m//s"}:
+        return 1.0
+    if u in {"cm/s", "cm//s"}:
+        notes.append(f"{name}: units {raw!r} converted to m/s (x 0.01)")
+        return 0.01
+    if u in {"mm/s", "mm//s"}:
+        notes.append(f"{name}: units {raw!r} converted to m/s (x 0.001)")
+        return 0.001
+    raise ForecastError(
+        f"{label}: variable {name}: units {raw!r} not understood; expected m/s (e.g. 'm s-1', 'meter second-1') or cm/s"
+    )
+
+
+def _velocity_values(var: xr.DataArray, name: str, label: str, notes: list[str]) -> NDArray[np.float64]:
+    """Decoded values (CF fill -> NaN, never 0), in m/s, float64."""
+    factor = _velocity_factor(var, name, label, notes)
+    values = np.asarray(var.values, dtype=np.float64)
+    packed = "scale_factor" in var.encoding or "add_offset" in var.encoding
+    if not packed:
+        # CF valid range (netCDF4's auto-masking does the same); only meaningful for unpacked data.
+        vmin, vmax = var.attrs.get("valid_min"), var.attrs.get("valid_max")
+        if "valid_range" in var.attrs:
+            vmin, vmax = np.asarray(var.attrs["valid_range"]).ravel()[:2]
+        with np.errstate(invalid="ignore"):
+            bad = np.zeros(values.shape, dtype=bool)
+            if vmin is not None:
+                bad |= values < float(vmin)
+            if vmax is not None:
+                bad |= values > float(vmax)
+        if np.any(bad):
+            notes.append(f"{name}: {int(bad.sum())} values outside the CF valid range set to NaN")
+            values = np.where(bad, np.nan, values)
+    with np.errstate(invalid="ignore"):
+        huge = np.abs(values) > _MAX_PLAUSIBLE_SPEED_M_S / factor
+    if np.any(huge):
+        notes.append(
+            f"{name}: {int(huge.sum())} values beyond {_MAX_PLAUSIBLE_SPEED_M_S:g} m/s taken as undeclared fill (NaN)"
+        )
+        values = np.where(huge, np.nan, values)
+    return values * factor if factor != 1.0 else values
+
+
+def _parse_time_units(units: str, label: str, name: str) -> tuple[float, str | None]:
+    """(seconds per unit, ISO origin or None) from CF units such as 'hours since 2023-02-25 12:00:00'."""
+    text = units.strip()
+    m = re.match(r"^\s*([A-Za-z]+)\s+since\s+(.+?)\s*$", text, re.IGNORECASE)
+    if m is None:
+        factor = _TIME_UNIT_S.get(text.lower())
+        if factor is None:
+            raise ForecastError(
+                f"{label}: time variable {name}: units {units!r} not understood; expected e.g. "
+                "'hours since 2023-02-25 12:00:00' or 'seconds'"
+            )
+        return factor, None
+    factor = _TIME_UNIT_S.get(m.group(1).lower())
+    if factor is None:
+        raise ForecastError(
+            f"{label}: time variable {name}: unit {m.group(1)!r} in {units!r} not supported; expected seconds, "
+            "minutes, hours or days"
+        )
+    ref = re.match(
+        r"^(\d{1,4})-(\d{1,2})-(\d{1,2})(?:[T\s]+(\d{1,2}):(\d{1,2})(?::(\d{1,2})(?:\.(\d*))?)?)?"
+        r"\s*(Z|UTC|GMT|[+-]\d{1,2}(?::?\d{2})?)?$",
+        m.group(2).strip(),
+        re.IGNORECASE,
+    )
+    if ref is None:
+        raise ForecastError(
+            f"{label}: time variable {name}: reference date in {units!r} not understood; expected "
+            "'UNIT since YYYY-MM-DD[ HH:MM:SS][Z]'"
+        )
+    year, month, day, hh, mm, ss, frac, tz = ref.groups()
+    stamp = f"{int(year):04d}-{int(month):02d}-{int(day):02d}T{int(hh or 0):02d}:{int(mm or 0):02d}:{int(ss or 0):02d}"
+    try:
+        origin = np.datetime64(stamp, "ms")
+    except ValueError as exc:
+        raise ForecastError(f"{label}: time variable {name}: invalid reference date in {units!r}") from exc
+    if frac:
+        origin = origin + np.timedelta64(int(round(float("0." + frac) * 1000)), "ms")
+    if tz and tz.upper() not in {"Z", "UTC", "GMT"}:
+        sign = -1 if tz.startswith("-") else 1
+        digits = tz[1:].replace(":", "")
+        hours, minutes = (int(digits[:-2]), int(digits[-2:])) if len(digits) > 2 else (int(digits), 0)
+        origin = origin - sign * np.timedelta64(hours * 60 + minutes, "m")  # local time minus offset = UTC
+    text_origin = str(origin.astype("datetime64[s]")) if origin == origin.astype("datetime64[s]") else str(origin)
+    return factor, text_origin + "Z"
+
+
+def _read_time(
+    ds: xr.Dataset, var: xr.DataArray, label: str, time_dim: str | None, notes: list[str]
+) -> tuple[NDArray[np.float64], str | None]:
+    """(seconds since origin, ISO origin or None) for the variable's time dimension."""
+    if time_dim is None:
+        notes.append("no time axis: one time step at t = 0 s")
+        return np.zeros(1), None
+    tvar_name = None
+    if time_dim in ds.variables and ds.variables[time_dim].ndim == 1:
+        tvar_name = time_dim
+    else:
+        for name, cand in ds.variables.items():
+            if cand.dims == (time_dim,) and (
+                _attr(cand, "standard_name") == "time" or " since " in f" {_attr(cand, 'units')} "
+            ):
+                tvar_name = str(name)
+                break
+    n = int(var.sizes[time_dim])
+    if tvar_name is None:
+        notes.append(f"time dimension {time_dim!r} has no coordinate variable: steps numbered 0..{n - 1} s")
+        return np.arange(n, dtype=np.float64), None
+    tvar = ds.variables[tvar_name]
+    values = np.asarray(tvar.values, dtype=np.float64)
+    if not np.all(np.isfinite(values)):
+        raise ForecastError(f"{label}: time variable {tvar_name} has missing values; expected {n} finite times")
+    units = _attr(tvar, "units")
+    if not units:
+        notes.append(f"time variable {tvar_name} has no units: taken as seconds, no reference date")
+        factor, origin = 1.0, None
+    else:
+        factor, origin = _parse_time_units(units, label, tvar_name)
+    calendar = _attr(tvar, "calendar").lower()
+    if origin is not None and calendar not in _STANDARD_CALENDARS:
+        notes.append(f"time calendar {calendar!r} is not the standard one: dates derived from it are approximate")
+    time_s = values * factor
+    if time_s.size > 1 and np.any(np.diff(time_s) <= 0):
+        raise ForecastError(
+            f"{label}: time variable {tvar_name}: expected strictly increasing times; got {values.tolist()[:8]}"
+        )
+    if origin is None:
+        notes.append(f"time units {units!r} give no reference date: time_origin is None, times are model seconds")
+    else:
+        notes.append(f"time: {tvar_name} in {units!r}")
+    return time_s, origin
+
+
+# --------------------------------------------------------------------------------------
+# Structured grids: regular lon/lat, projected X/Y, curvilinear with 2-D lon/lat
+# --------------------------------------------------------------------------------------
+
+
+def _assign_roles(ds: xr.Dataset, var: xr.DataArray, name: str, label: str) -> dict[str, str]:
+    """Map 'T', 'Z', 'Y', 'X' to the variable's dimensions; size-1 extras are dropped later."""
+    dims = [str(d) for d in var.dims]
+    if len(dims) < 2:
+        raise ForecastError(f"{label}: variable {name} has dimensions {dims}; expected at least (lat, lon) or (y, x)")
+    roles: dict[str, str] = {}
+    for d in dims:
+        r = _dim_role(ds, d)
+        if r == "S":
+            r = "Z"
+        if r is not None and r not in roles:
+            roles[r] = d
+    if "Y" not in roles or "X" not in roles:
+        rest = [d for d in dims if d not in roles.values()]
+        if "Y" in roles or "X" in roles or len(rest) < 2:
+            horizontal = dims[-2:]
+        else:
+            horizontal = rest[-2:]
+        roles["Y"], roles["X"] = horizontal
+        for key in ("T", "Z"):
+            if key in roles and roles[key] in horizontal:
+                del roles[key]
+    leftovers = [d for d in dims if d not in roles.values()]
+    for d in leftovers:
+        if var.sizes[d] == 1:
+            continue
+        if "T" not in roles:
+            roles["T"] = d
+        else:
+            raise ForecastError(
+                f"{label}: variable {name} has a dimension {d!r} of size {var.sizes[d]} that is not time, depth, "
+                f"latitude or longitude; expected dimensions like (time, depth, lat, lon); got {tuple(dims)}"
+            )
+    return roles
+
+
+def _to_tzyx(var: xr.DataArray, roles: dict[str, str]) -> xr.DataArray:
+    for d in [str(d) for d in var.dims if str(d) not in roles.values()]:
+        var = var.isel({d: 0})
+    if "T" not in roles:
+        var = var.expand_dims("__t")
+    if "Z" not in roles:
+        var = var.expand_dims("__z")
+    order = [roles.get("T", "__t"), roles.get("Z", "__z"), roles["Y"], roles["X"]]
+    return var.transpose(*order)
+
+
+def _load_structured(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list[str]) -> dict[str, Any]:
+    ds, label = ctx.ds, ctx.label
+    u_var, v_var = ds[u_name], ds[v_name]
+    if u_var.dims != v_var.dims or u_var.shape != v_var.shape:
+        raise ForecastError(
+            f"{label}: variables {u_name} {tuple(u_var.dims)} and {v_name} {tuple(v_var.dims)} are on different "
+            "grids; expected both on the same (time, depth, lat, lon) grid, or a ROMS/CROCO C-grid with eta_/xi_ dims"
+        )
+    roles = _assign_roles(ds, u_var, u_name, label)
+    ydim, xdim = roles["Y"], roles["X"]
+    u = _velocity_values(_to_tzyx(u_var, roles), u_name, label, notes)
+    v = _velocity_values(_to_tzyx(v_var, roles), v_name, label, notes)
+    time_s, origin = _read_time(ds, u_var, label, roles.get("T"), notes)
+    depth = _read_depth_axis(ds, u_var, label, roles.get("Z"), notes)
+    if depth is not None and depth.size > 1 and depth[0] > depth[-1]:
+        depth = depth[::-1]
+        u, v = u[:, ::-1], v[:, ::-1]
+        notes.append("depth levels reversed to shallowest first")
+    if depth is not None and depth.size > 1 and np.any(np.diff(depth) <= 0):
+        raise ForecastError(
+            f"{label}: depth levels of {u_name}: expected strictly monotonic depths; got {depth.tolist()[:12]}"
+        )
+
+    xcoord = ds.variables[xdim] if xdim in ds.variables and ds.variables[xdim].ndim == 1 else None
+    ycoord = ds.variables[ydim] if ydim in ds.variables and ds.variables[ydim].ndim == 1 else None
+    grid_mapping = _grid_mapping_var(ds, u_var)
+    if xcoord is not None and ycoord is not None and _is_lon_like(xdim, xcoord) and _is_lat_like(ydim, ycoord):
+        # Regular lon/lat grid (spec section 1: separable interpolation).
+        lon = np.asarray(xcoord.values, dtype=np.float64)
+        lat = np.asarray(ycoord.values, dtype=np.float64)
+        lon, lat, u, v = _orient_regular(lon, lat, u, v, label, xdim, ydim, notes)
+        if kind == "grid_xy":
+            notes.append("x/y components on a regular lon/lat grid: x is east and y is north, no rotation")
+        elif kind == "unknown":
+            notes.append("no standard_name on the velocities: taken as eastward/northward on the lon/lat grid")
+        return {"u": u, "v": v, "lon": lon, "lat": lat, "depth": depth, "time_s": time_s, "time_origin": origin}
+
+    ny, nx = int(u_var.sizes[ydim]), int(u_var.sizes[xdim])
+    lonlat = _find_2d_lonlat(ctx, u_var, ydim, xdim)
+    crs = None
+    xy: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+    if grid_mapping is not None and xcoord is not None and ycoord is not None:
+        crs = _crs_from_grid_mapping(grid_mapping, label)
+        xy = (np.asarray(xcoord.values, dtype=np.float64), np.asarray(ycoord.values, dtype=np.float64))
+    if lonlat is not None:
+        lon, lat, where = lonlat
+        notes.append(f"2-D lon/lat from {where}")
+    elif crs is not None and xy is not None:
+        lon, lat = _lonlat_from_projection(crs, xy[0], xy[1])
+        notes.append(f"no lon/lat variables: computed from {xdim}/{ydim} with grid_mapping {grid_mapping.name!r}")
+    else:
+        raise ForecastError(
+            f"{label}: no longitude/latitude for {u_name} on ({ydim}, {xdim}): expected 1-D lon/lat coordinate "
+            "variables, 2-D lon/lat variables (e.g. named in the 'coordinates' attribute), or X/Y coordinates with a "
+            "CF grid_mapping to compute them; add them to the file or pass --grid-file GRID.nc with 2-D lon/lat"
+        )
+    if not np.any(np.isfinite(lon) & np.isfinite(lat)):
+        raise ForecastError(f"{label}: lon/lat for {u_name} are all missing; expected finite degrees")
+
+    if kind == "east_north":
+        pass
+    elif crs is not None and xy is not None:
+        cos_x, sin_x, cos_y, sin_y = _projection_axes(crs, xy[0], xy[1])
+        u, v = u * cos_x + v * cos_y, u * sin_x + v * sin_y
+        between = np.arctan2(sin_y * cos_x - cos_y * sin_x, cos_y * cos_x + sin_y * sin_x)  # angle x-axis -> y-axis
+        skew = float(np.degrees(np.nanmax(np.abs(between - np.pi / 2))))
+        notes.append(
+            f"rotated projection x/y components to east/north with grid_mapping {grid_mapping.name!r} "
+            f"({_crs_text(crs)}): local x-axis direction from the projection at every point"
+            + (f"; axes depart from perpendicular by up to {skew:.3g} deg" if skew > 1e-6 else "")
+        )
+        if kind == "unknown":
+            notes.append("no standard_name on the velocities: taken as projection x/y components (projected grid)")
+    else:
+        found = ctx.find(("angle",), (ny, nx))
+        if found is None:
+            raise ForecastError(
+                f"{label}: {u_name}/{v_name} are grid-relative (x/y) components on a curvilinear grid but there is no "
+                "grid_mapping and no 'angle' variable to rotate them to east/north; pass --grid-file GRID.nc with "
+                "'angle', or --variables with eastward/northward variables"
+            )
+        angle = np.asarray(found[1].values, dtype=np.float64)
+        u, v = _rotate(u, v, angle)
+        notes.append(f"rotated grid x/y components to east/north by 'angle' from {found[2]}")
+    return {"u": u, "v": v, "lon": lon, "lat": lat, "depth": depth, "time_s": time_s, "time_origin": origin}
+
+
+def _read_depth_axis(
+    ds: xr.Dataset, var: xr.DataArray, label: str, zdim: str | None, notes: list[str]
+) -> NDArray[np.float64] | None:
+    """Depth levels (positive down) for a z-level variable; None when it has no depth axis at all."""
+    if zdim is not None:
+        n = int(var.sizes[zdim])
+        if zdim not in ds.variables or ds.variables[zdim].ndim != 1:
+            if n == 1:
+                notes.append(f"depth dimension {zdim!r} of size 1 without values: treated as no depth axis")
+                return None
+            raise ForecastError(
+                f"{label}: depth dimension {zdim!r} ({n} levels) has no coordinate variable with the depths; "
+                "expected a 1-D variable of the same name in metres"
+            )
+        zvar = ds.variables[zdim]
+    else:
+        zvar = None
+        coords = str(var.attrs.get("coordinates", "")).split()
+        for cname in coords + ["depth"]:
+            if cname in ds.variables and ds.variables[cname].ndim == 0:
+                cand = ds.variables[cname]
+                if _attr(cand, "standard_name") in {"depth", "height"} or cname.lower() in _DEPTH_NAMES:
+                    zvar = cand
+                    zdim = cname
+                    break
+        if zvar is None:
+            notes.append("no depth axis: the field applies to every layer (spec section 1)")
+            return None
+    values = np.atleast_1d(np.asarray(zvar.values, dtype=np.float64))
+    if not np.all(np.isfinite(values)):
+        raise ForecastError(f"{label}: depth variable {zdim} has missing values; expected finite depths in metres")
+    units = _attr(zvar, "units").lower()
+    if units in {"cm", "centimeters", "centimetres"}:
+        values = values / 100.0
+    elif units not in {"", "m", "meter", "meters", "metre", "metres"}:
+        raise ForecastError(f"{label}: depth variable {zdim}: units {units!r} not supported; expected metres")
+    positive = _attr(zvar, "positive").lower()
+    std = _attr(zvar, "standard_name").lower()
+    elevation = positive == "" and np.all(values <= 0) and np.any(values < 0)
+    if positive == "up" or std in {"height", "altitude"} or elevation:
+        values = -values
+        notes.append(f"depth variable {zdim} is elevation (positive up): negated to depth positive down")
+    if values.size == 1:
+        notes.append(
+            f"one depth level at {values[0]:g} m ({zdim}): layers shallower take it, deeper layers are land "
+            "(spec section 1)"
+        )
+    else:
+        notes.append(f"{values.size} fixed depth levels from {zdim}: {', '.join(f'{d:g}' for d in values)} m")
+    return values
+
+
+def _orient_regular(
+    lon: NDArray[np.float64],
+    lat: NDArray[np.float64],
+    u: NDArray[np.float64],
+    v: NDArray[np.float64],
+    label: str,
+    xdim: str,
+    ydim: str,
+    notes: list[str],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Flip descending axes to ascending and drop a duplicated wrap-around column (spec section 1 grids)."""
+    for name, axis in ((xdim, lon), (ydim, lat)):
+        if not np.all(np.isfinite(axis)):
+            raise ForecastError(f"{label}: coordinate {name} has missing values; expected finite degrees")
+    if lat.size > 1 and lat[0] > lat[-1]:
+        lat, u, v = lat[::-1], u[:, :, ::-1, :], v[:, :, ::-1, :]
+        notes.append(f"latitude {ydim} was descending: flipped to ascending")
+    if lon.size > 1 and lon[0] > lon[-1]:
+        lon, u, v = lon[::-1], u[:, :, :, ::-1], v[:, :, :, ::-1]
+        notes.append(f"longitude {xdim} was descending: flipped to ascending")
+    if lon.size > 2 and abs(lon[-1] - lon[0] - 360.0) < 1e-6:
+        lon, u, v = lon[:-1], u[..., :-1], v[..., :-1]
+        notes.append(f"longitude {xdim}: last column repeats the first (+360 deg): dropped")
+    for name, axis in ((xdim, lon), (ydim, lat)):
+        if axis.size > 1 and np.any(np.diff(axis) <= 0):
+            raise ForecastError(
+                f"{label}: coordinate {name}: expected strictly monotonic values; got {axis[:8].tolist()}..."
+            )
+    if _is_periodic_lon(lon):
+        notes.append("longitude spans 360 deg: treated as periodic (wraps at the date line)")
+    return np.ascontiguousarray(lon), np.ascontiguousarray(lat), np.ascontiguousarray(u), np.ascontiguousarray(v)
+
+
+def _find_2d_lonlat(
+    ctx: _Context, var: xr.DataArray, ydim: str, xdim: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64], str] | None:
+    ds = ctx.ds
+    names = str(var.attrs.get("coordinates", "")).split() + [str(n) for n in ds.variables]
+    for dset, where in ((ds, ctx.label), (ctx.grid_ds, ctx.grid_label)):
+        if dset is None:
+            continue
+        lon_name = lat_name = None
+        for name in names if dset is ds else [str(n) for n in dset.variables]:
+            if name not in dset.variables:
+                continue
+            cand = dset.variables[name]
+            if cand.ndim != 2 or tuple(cand.shape) != (var.sizes[ydim], var.sizes[xdim]):
+                continue
+            if lon_name is None and _is_lon_like(name, cand):
+                lon_name = name
+            elif lat_name is None and _is_lat_like(name, cand):
+                lat_name = name
+        if lon_name and lat_name:
+            lon = np.asarray(dset.variables[lon_name].values, dtype=np.float64)
+            lat = np.asarray(dset.variables[lat_name].values, dtype=np.float64)
+            if dset.variables[lon_name].dims == (xdim, ydim) and ydim != xdim:
+                lon, lat = lon.T, lat.T
+            return lon, lat, f"{lon_name}/{lat_name} in {where}"
+    return None
+
+
+def _grid_mapping_var(ds: xr.Dataset, var: xr.DataArray) -> xr.DataArray | None:
+    name = _attr(var, "grid_mapping")
+    if not name:
+        return None
+    name = name.split(":")[0].split()[0]
+    return ds[name] if name in ds.variables else None
+
+
+def _crs_from_grid_mapping(gm: xr.DataArray, label: str) -> Any:
+    import pyproj  # lazily: only projected grids need it
+
+    attrs = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in gm.attrs.items()}
+    attempts: list[str] = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for key in ("crs_wkt", "spatial_ref", "proj4", "proj4text", "proj4_string"):
+            if key in attrs:
+                try:
+                    return pyproj.CRS.from_user_input(attrs[key])
+                except pyproj.exceptions.CRSError as exc:
+                    attempts.append(f"{key}: {exc}")
+        try:
+            return pyproj.CRS.from_cf(attrs)
+        except (pyproj.exceptions.CRSError, KeyError, ValueError, TypeError) as exc:
+            attempts.append(f"CF attributes: {exc}")
+    raise ForecastError(
+        f"{label}: grid_mapping {gm.name!r}: cannot build a projection ({'; '.join(attempts)}); expected CF "
+        "grid_mapping attributes or a proj4/crs_wkt attribute"
+    )
+
+
+def _crs_text(crs: Any) -> str:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            return str(crs.to_proj4())
+        except Exception:  # noqa: BLE001 - only for a note; the CRS itself is valid
+            return str(crs.name)
+
+
+def _lonlat_from_projection(
+    crs: Any, x: NDArray[np.float64], y: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    import pyproj
+
+    transformer = pyproj.Transformer.from_crs(crs, crs.geodetic_crs, always_xy=True)
+    xx, yy = np.meshgrid(x, y)
+    lon, lat = transformer.transform(xx, yy)
+    return np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64)
+
+
+def _projection_axes(
+    crs: Any, x: NDArray[np.float64], y: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Unit vectors (east, north components) of the projection's +X and +Y axes at every (Y, X) point.
+
+    Central differences of a step 1e-3 of the grid spacing, mapped to the local east/north
+    plane; velocity east = u*cos_x + v*cos_y, north = u*sin_x + v*sin_y (exact rotation for
+    conformal projections such as polar stereographic).
+    """
+    import pyproj
+
+    transformer = pyproj.Transformer.from_crs(crs, crs.geodetic_crs, always_xy=True)
+    xx, yy = np.meshgrid(x, y)
+    spacing = [np.median(np.abs(np.diff(a))) for a in (x, y) if a.size > 1]
+    step = 1e-3 * (min(spacing) if spacing else 1.0)
+
+    def direction(dx: float, dy: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        lon_p, lat_p = transformer.transform(xx + dx, yy + dy)
+        lon_m, lat_m = transformer.transform(xx - dx, yy - dy)
+        dlon = (np.asarray(lon_p) - np.asarray(lon_m) + 180.0) % 360.0 - 180.0
+        dlat = np.asarray(lat_p) - np.asarray(lat_m)
+        east = dlon * np.cos(np.radians(0.5 * (np.asarray(lat_p) + np.asarray(lat_m))))
+        norm = np.hypot(east, dlat)
+        return east / norm, dlat / norm
+
+    cos_x, sin_x = direction(step, 0.0)
+    cos_y, sin_y = direction(0.0, step)
+    return cos_x, sin_x, cos_y, sin_y
+
+
+def _rotate(
+    u: NDArray[np.float64], v: NDArray[np.float64], angle: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Grid xi/eta components to east/north; ``angle`` is from east to the xi axis (ROMS convention)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return u * c - v * s, u * s + v * c
+
+
+# --------------------------------------------------------------------------------------
+# ROMS / CROCO native C-grid output
+# --------------------------------------------------------------------------------------
+
+
+def _load_c_grid(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list[str]) -> dict[str, Any]:
+    ds, label = ctx.ds, ctx.label
+    u_var, v_var = ds[u_name], ds[v_name]
+    hint = ctx.grid_hint()
+
+    lon_found = ctx.find(("lon_rho",)) or None
+    lat_found = ctx.find(("lat_rho",)) or None
+    if lon_found is None or lat_found is None:
+        where = "the file" if ctx.grid_ds is None else f"the file or the grid file {ctx.grid_label}"
+        raise ForecastError(
+            f"{label}: ROMS/CROCO C-grid variables {u_name}/{v_name} but no lon_rho/lat_rho (rho-point longitude/"
+            f"latitude) in {where}{hint}"
+        )
+    lon = np.asarray(lon_found[1].values, dtype=np.float64)
+    lat = np.asarray(lat_found[1].values, dtype=np.float64)
+    if lon.ndim != 2 or lon.shape != lat.shape:
+        raise ForecastError(
+            f"{label}: lon_rho/lat_rho: expected two 2-D arrays of equal shape; got {lon.shape}, {lat.shape}"
+        )
+    ny, nx = lon.shape
+    rho_ydim, rho_xdim = (str(d) for d in lon_found[1].dims)
+    for nm, arr in (("lon_rho", lon), ("lat_rho", lat)):
+        finite = arr[np.isfinite(arr)]
+        if finite.size == 0 or np.ptp(finite) == 0.0:
+            raise ForecastError(
+                f"{label}: {nm} in {lon_found[2]} is constant or missing (broken packing?); "
+                f"expected varying degrees{hint}"
+            )
+    notes.append(f"ROMS/CROCO C-grid: rho grid {ny} x {nx} ({rho_ydim}, {rho_xdim}), lon/lat from {lon_found[2]}")
+
+    u_roles = _c_grid_dims(ds, u_var, u_name, label)
+    v_roles = _c_grid_dims(ds, v_var, v_name, label)
+    if u_roles.get("S") != v_roles.get("S") or u_roles.get("T") != v_roles.get("T"):
+        raise ForecastError(
+            f"{label}: {u_name} {tuple(u_var.dims)} and {v_name} {tuple(v_var.dims)} have different time/level "
+            "dimensions; expected the same"
+        )
+    u = _velocity_values(_to_c_tsyx(u_var, u_roles), u_name, label, notes)
+    v = _velocity_values(_to_c_tsyx(v_var, v_roles), v_name, label, notes)
+    (nyu, nxu), (nyv, nxv) = u.shape[-2:], v.shape[-2:]
+    u_xdim, v_ydim = u_roles["X"], v_roles["Y"]
+    if nyu != ny or nxu not in (nx - 1, nx):
+        raise ForecastError(
+            f"{label}: {u_name} horizontal shape ({nyu}, {nxu}) does not fit the rho grid ({ny}, {nx}); expected "
+            f"({ny}, {nx - 1}) for u points or ({ny}, {nx}){hint}"
+        )
+    if nxv != nx or nyv not in (ny - 1, ny):
+        raise ForecastError(
+            f"{label}: {v_name} horizontal shape ({nyv}, {nxv}) does not fit the rho grid ({ny}, {nx}); expected "
+            f"({ny - 1}, {nx}) for v points or ({ny}, {nx}){hint}"
+        )
+    u_stag = nxu == nx - 1 or u_xdim != rho_xdim
+    v_stag = nyv == ny - 1 or v_ydim != rho_ydim
+    if (u_stag and nxu == nx) or (v_stag and nyv == ny):
+        notes.append(
+            "u/v point dimensions have the rho sizes (subsetting artifact): u[i] taken between rho i and i+1, "
+            "v[j] between rho j and j+1"
+        )
+
+    # Land masks (1 = water): land u/v are not NaN in these files (spec section 1 'land').
+    mask_rho_f = ctx.find(("mask_rho",), (ny, nx))
+    mask_rho = None if mask_rho_f is None else _mask01(mask_rho_f[1])
+    mask_u = _c_grid_mask(ctx, "mask_u", (nyu, nxu), mask_rho, "x", notes)
+    mask_v = _c_grid_mask(ctx, "mask_v", (nyv, nxv), mask_rho, "y", notes)
+    if mask_u is not None:
+        u = np.where(mask_u, u, np.nan)
+    if mask_v is not None:
+        v = np.where(mask_v, v, np.nan)
+    if u_stag or v_stag:
+        u = _to_rho(u, nx, axis=-1) if u_stag else u
+        v = _to_rho(v, ny, axis=-2) if v_stag else v
+        notes.append(
+            "u/v averaged from u/v points to rho points (a NaN neighbour makes the point land); rho points on the "
+            "domain edge without two neighbours are land"
+        )
+    if mask_rho is not None:
+        u = np.where(mask_rho, u, np.nan)
+        v = np.where(mask_rho, v, np.nan)
+        notes.append(f"mask_rho applied from {mask_rho_f[2]}")
+    if mask_rho is None and mask_u is None and mask_v is None:
+        notes.append("no mask_rho/mask_u/mask_v found: land is only where the file's values are missing")
+
+    if kind != "east_north":
+        angle_f = ctx.find(("angle",), (ny, nx))
+        if angle_f is None:
+            raise ForecastError(
+                f"{label}: {u_name}/{v_name} are grid-relative (xi/eta) components but no 'angle' at rho points "
+                f"({ny}, {nx}) was found to rotate them to east/north{hint}"
+            )
+        angle = np.asarray(angle_f[1].values, dtype=np.float64)
+        if not np.all(np.isfinite(angle)):
+            angle = np.where(np.isfinite(angle), angle, np.nan)
+        u, v = _rotate(u, v, angle)
+        notes.append(
+            f"rotated xi/eta components to east/north by 'angle' from {angle_f[2]} "
+            f"({np.nanmin(angle):.4g}..{np.nanmax(angle):.4g} rad)"
+        )
+
+    time_s, origin = _read_time(ds, u_var, label, u_roles.get("T"), notes)
+    depth = None
+    covers_surface = True
+    if "S" in u_roles and _dim_role(ds, u_roles["S"]) != "S":
+        # Fixed z-levels on a ROMS grid (e.g. rho-point output interpolated to depths).
+        depth = _read_depth_axis(ds, u_var, label, u_roles["S"], notes)
+        if depth is not None and depth.size > 1 and depth[0] > depth[-1]:
+            depth, u, v = depth[::-1], u[:, ::-1], v[:, ::-1]
+        if depth is not None and depth.size > 1 and np.any(np.diff(depth) <= 0):
+            raise ForecastError(f"{label}: depth levels of {u_name}: expected strictly monotonic depths")
+    elif "S" in u_roles:
+        depth, covers_surface = _s_level_depths(ctx, u_roles["S"], (ny, nx), time_s.size, u_roles.get("T"), notes)
+        # Shallowest level first (spec section 1 orders layers by depth).
+        depth, u, v = depth[:, ::-1], u[:, ::-1], v[:, ::-1]
+    else:
+        notes.append("no vertical axis on the velocities (surface field): the field applies to every layer")
+    return {
+        "u": np.ascontiguousarray(u),
+        "v": np.ascontiguousarray(v),
+        "lon": lon,
+        "lat": lat,
+        "depth": None if depth is None else np.ascontiguousarray(depth),
+        "time_s": time_s,
+        "time_origin": origin,
+        "covers_surface": covers_surface,
+    }
+
+
+def _c_grid_dims(ds: xr.Dataset, var: xr.DataArray, name: str, label: str) -> dict[str, str]:
+    dims = [str(d) for d in var.dims]
+    if len(dims) < 2 or len(dims) > 4:
+        raise ForecastError(
+            f"{label}: {name} has dimensions {tuple(dims)}; expected (time, s_rho, eta, xi) or (time, eta, xi)"
+        )
+    roles = {"Y": dims[-2], "X": dims[-1]}
+    for d in dims[:-2]:
+        r = _dim_role(ds, d)
+        if r in ("S", "Z") and "S" not in roles:
+            roles["S"] = d
+        elif r == "T" and "T" not in roles:
+            roles["T"] = d
+        elif var.sizes[d] != 1:
+            if "T" not in roles and d == dims[0]:
+                roles["T"] = d
+            else:
+                raise ForecastError(
+                    f"{label}: {name}: dimension {d!r} is neither time nor an s-level axis; expected "
+                    f"(time, s_rho, eta, xi); got {tuple(dims)}"
+                )
+    return roles
+
+
+def _to_c_tsyx(var: xr.DataArray, roles: dict[str, str]) -> xr.DataArray:
+    mapped = {"T": roles.get("T"), "Z": roles.get("S"), "Y": roles["Y"], "X": roles["X"]}
+    return _to_tzyx(var, {k: d for k, d in mapped.items() if d is not None})
+
+
+def _mask01(var: xr.DataArray) -> NDArray[np.bool_]:
+    """Water where the (possibly packed, 0.99998) mask is above one half; NaN masks are land."""
+    values = np.asarray(var.values, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        return values > 0.5
+
+
+def _c_grid_mask(
+    ctx: _Context,
+    name: str,
+    shape: tuple[int, int],
+    mask_rho: NDArray[np.bool_] | None,
+    axis: str,
+    notes: list[str],
+) -> NDArray[np.bool_] | None:
+    found = ctx.find((name,), shape)
+    if found is not None:
+        notes.append(f"{name} applied from {found[2]}")
+        return _mask01(found[1])
+    if mask_rho is None:
+        return None
+    ny, nx = mask_rho.shape
+    if axis == "x":
+        right = np.minimum(np.arange(shape[1]) + 1, nx - 1)
+        mask = mask_rho[:, : shape[1]] & mask_rho[:, right]
+    else:
+        up = np.minimum(np.arange(shape[0]) + 1, ny - 1)
+        mask = mask_rho[: shape[0], :] & mask_rho[up, :]
+    notes.append(f"{name} not in the file: derived from mask_rho (water where both rho neighbours are water)")
+    return mask
+
+
+def _to_rho(a: NDArray[np.float64], n_rho: int, *, axis: int) -> NDArray[np.float64]:
+    """Average staggered values to rho points: value k sits between rho k and k+1 (C-grid)."""
+    a = np.moveaxis(a, axis, -1)
+    out = np.full(a.shape[:-1] + (n_rho,), np.nan)
+    m = min(a.shape[-1] - 1, n_rho - 1)
+    out[..., 1 : 1 + m] = 0.5 * (a[..., :m] + a[..., 1 : m + 1])
+    return np.moveaxis(out, -1, axis)
+
+
+def _s_level_depths(
+    ctx: _Context,
+    s_dim: str,
+    rho_shape: tuple[int, int],
+    n_times: int,
+    time_dim: str | None,
+    notes: list[str],
+) -> tuple[NDArray[np.float64], bool]:
+    """Depth (positive down) of every s-level, (T, N, Y, X) in file order (bottom first), and covers_surface."""
+    ds, label = ctx.ds, ctx.label
+    hint = ctx.grid_hint()
+    n = int(ds.sizes[s_dim])
+    s_name = s_dim if s_dim in ds.variables else None
+    if s_name is None:
+        raise ForecastError(f"{label}: s-level dimension {s_dim!r} has no coordinate variable with s values")
+    s_var = ds[s_name]
+    s = np.asarray(s_var.values, dtype=np.float64)
+    cs_found = ctx.find(("Cs_r", "Cs_rho"), (n,))
+    hc_found = ctx.find(("hc",))
+    h_found = ctx.find(("h",), rho_shape)
+    missing = [nm for nm, f in (("Cs_r (or Cs_rho)", cs_found), ("hc", hc_found), ("h", h_found)) if f is None]
+    if missing:
+        raise ForecastError(
+            f"{label}: s-level velocities need {', '.join(missing)} to compute depths; not found in the file"
+            f"{' or the grid file' if ctx.grid_ds is not None else ''}{hint}"
+        )
+    assert cs_found is not None and hc_found is not None and h_found is not None
+    cs = np.asarray(cs_found[1].values, dtype=np.float64)
+    hc = float(np.asarray(hc_found[1].values, dtype=np.float64).ravel()[0])
+    h = np.asarray(h_found[1].values, dtype=np.float64)
+    vt_found = ctx.find(("Vtransform",))
+    if vt_found is not None:
+        vtransform = int(round(float(np.asarray(vt_found[1].values).ravel()[0])))
+    elif str(s_var.attrs.get("Vtransform", "")).strip():
+        vtransform = int(str(s_var.attrs["Vtransform"]).strip())
+    elif _attr(s_var, "standard_name").endswith("g2"):
+        vtransform = 2
+    elif _attr(s_var, "standard_name").endswith("g1"):
+        vtransform = 1
+    else:
+        raise ForecastError(
+            f"{label}: s-level depths need Vtransform (1 or 2); no 'Vtransform' variable or attribute and no "
+            "standard_name ocean_s_coordinate_g1/g2 on the s variable"
+        )
+    if vtransform not in (1, 2):
+        raise ForecastError(f"{label}: Vtransform = {vtransform} not supported; expected 1 or 2")
+    zeta_found = ctx.find(("zeta",))
+    if zeta_found is not None and zeta_found[1].shape[-2:] == rho_shape:
+        zvar = zeta_found[1]
+        if time_dim is not None and time_dim in zvar.dims:
+            zvar = zvar.transpose(time_dim, *[d for d in zvar.dims if d != time_dim])
+            zeta = np.asarray(zvar.values, dtype=np.float64).reshape(n_times, *rho_shape)
+        else:
+            zeta = np.broadcast_to(np.asarray(zvar.values, dtype=np.float64).reshape(rho_shape), (n_times, *rho_shape))
+        zeta = np.where(np.isfinite(zeta), zeta, 0.0)  # land fill: the velocities there are NaN anyway
+    else:
+        zeta = np.zeros((n_times, *rho_shape))
+        notes.append("no zeta in the file: free surface taken as 0 for s-level depths")
+    s4 = s[None, :, None, None]
+    c4 = cs[None, :, None, None]
+    h4 = h[None, None, :, :]
+    z4 = zeta[:, None, :, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if vtransform == 2:
+            z0 = (hc * s4 + h4 * c4) / (hc + h4)
+            z = z4 + (z4 + h4) * z0
+        else:
+            z0 = hc * s4 + (h4 - hc) * c4
+            z = z0 + z4 * (1.0 + z0 / h4)
+    depth = -z
+    notes.append(
+        f"{n} s-levels ({s_name}) converted to depths per column with Vtransform={vtransform}, hc={hc:g}, "
+        f"{cs_found[0]}, h from {h_found[2]}, zeta"
+    )
+    covers_surface = True
+    if "s_w" in ds.variables:
+        s_w = np.sort(np.asarray(ds["s_w"].values, dtype=np.float64))
+        if s_w.size > n + 1 and s_w.size >= 2 and np.max(s) < s_w[-2]:
+            covers_surface = False
+            notes.append(
+                f"only {n} of {s_w.size - 1} s-levels kept and the top kept level (s = {np.max(s):.4g}) is not the "
+                "model's top level: depths above it at each column are not covered and count as land (interpretation "
+                "of spec section 1's 'shallower than the first level' rule, which is meant for z-level products)"
+            )
+    return depth, covers_surface
+
+
+# --------------------------------------------------------------------------------------
+# Resampling onto the planning grid (spec section 1)
+# --------------------------------------------------------------------------------------
+
+
+def resample(forecast: Forecast, grid: Grid, *, time_index: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """u, v on the planning grid, each shape (L, ny, nx) float64, NaN = land, exactly per spec section 1.
+
+    Regular forecasts: separable linear interpolation in lon, lat and depth; curvilinear
+    forecasts: per-column vertical interpolation, then barycentric interpolation on a Delaunay
+    triangulation in a locally scaled lon/lat plane. A value that gives non-zero weight to a NaN
+    node is NaN; zero-weight nodes are not touched; coordinates within 4 float32 ulps of a
+    source node snap to it. Outside the lon/lat range: NaN; shallower than the first level: that
+    level (unless ``covers_surface`` is False); deeper than the last level: NaN.
+    """
+    if not isinstance(forecast, Forecast):
+        raise ForecastError(f"resample: expected a Forecast; got {type(forecast).__name__}")
+    if not isinstance(grid, Grid):
+        raise GridError(f"resample: expected a planning Grid; got {type(grid).__name__}")
+    t = _check_time_index(forecast, time_index)
+    if forecast.is_regular:
+        return _resample_regular(forecast, grid, t)
+    return _resample_curvilinear(forecast, grid, t)
+
+
+def _check_time_index(forecast: Forecast, time_index: int) -> int:
+    if isinstance(time_index, bool) or not isinstance(time_index, (int, np.integer)):
+        raise ForecastError(
+            f"{forecast.source}: time index: expected an integer in 0..{forecast.n_times - 1}; got {time_index!r}"
+        )
+    t = int(time_index)
+    if not 0 <= t < forecast.n_times:
+        raise ForecastError(
+            f"{forecast.source}: time index {t} out of range: the forecast has {forecast.n_times} time steps, "
+            f"valid indices 0..{forecast.n_times - 1}"
+        )
+    return t
+
+
+def _axis_snap_tol(src: NDArray[np.float64]) -> float:
+    """Snap tolerance of a 1-D axis: a few float32 ulps at its largest magnitude (spec section 1)."""
+    scale = np.float32(np.max(np.abs(src)))
+    tol = _SNAP_ULPS * float(np.spacing(scale))
+    if src.size > 1:
+        tol = min(tol, _SNAP_MAX_FRACTION_OF_SPACING * float(np.min(np.diff(src))))
+    return tol
+
+
+def _elementwise_snap_tol(src: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Snap tolerance per value (per-column s-level depths, computed in float64)."""
+    return _SNAP_ULPS * np.spacing(np.abs(src).astype(np.float32)).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class _AxisWeights:
+    """Linear weights along one axis: value = w0 * f[i0] + w1 * f[i1]; invalid targets are land."""
+
+    i0: NDArray[np.intp]
+    i1: NDArray[np.intp]
+    w0: NDArray[np.float64]
+    w1: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+
+
+def _axis_weights(src: NDArray[np.float64], x: NDArray[np.float64], *, below: str) -> _AxisWeights:
+    """Weights of targets ``x`` on the ascending axis ``src``.
+
+    ``below`` says what a target before ``src[0]`` gets: 'land' or 'first' (the first node,
+    spec section 1's rule for layers shallower than the first level). After ``src[-1]``: land.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = src.size
+    tol = _axis_snap_tol(src)
+    k = np.searchsorted(src, x, side="left")  # src[k-1] < x <= src[k]
+    lo = np.clip(k - 1, 0, n - 1)
+    hi = np.clip(k, 0, n - 1)
+    near_hi = np.abs(x - src[hi]) <= tol
+    near_lo = np.abs(x - src[lo]) <= tol
+    snapped = near_hi | near_lo
+    snap_idx = np.where(near_hi, hi, lo)
+    inside = (x > src[0]) & (x < src[-1]) & ~snapped
+    i0 = np.where(snapped, snap_idx, np.where(inside, lo, 0))
+    i1 = np.where(inside, hi, i0)
+    span = src[i1] - src[i0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w1 = np.where(inside, (x - src[i0]) / np.where(span > 0, span, 1.0), 0.0)
+    w0 = np.where(inside, 1.0 - w1, 1.0)
+    valid = snapped | inside
+    if below == "first":
+        before = (x < src[0]) & ~snapped
+        i0 = np.where(before, 0, i0)
+        i1 = np.where(before, 0, i1)
+        w0 = np.where(before, 1.0, w0)
+        w1 = np.where(before, 0.0, w1)
+        valid = valid | before
+    w0 = np.where(valid, w0, 0.0)
+    w1 = np.where(valid, w1, 0.0)
+    return _AxisWeights(i0.astype(np.intp), i1.astype(np.intp), w0, w1, valid)
+
+
+def _accumulate(terms: list[tuple[NDArray[np.float64], NDArray[np.float64]]]) -> NDArray[np.float64]:
+    """Sum of ``w * value`` over the terms with w > 0; NaN where such a term's value is not finite.
+
+    Nodes with zero weight are not touched, so ``NaN * 0`` never poisons a value (spec section 1).
+    """
+    acc: NDArray[np.float64] | None = None
+    bad: NDArray[np.bool_] | None = None
+    with np.errstate(invalid="ignore"):
+        for w, val in terms:
+            used = w > 0.0
+            term = np.where(used, w * val, 0.0)
+            this_bad = used & ~np.isfinite(val)
+            acc = term if acc is None else acc + term
+            bad = this_bad if bad is None else bad | this_bad
+    assert acc is not None and bad is not None
+    return np.where(bad, np.nan, acc)
+
+
+def _vertical(
+    values: NDArray[np.float64],
+    depth: NDArray[np.float64] | None,
+    layers: NDArray[np.float64],
+    covers_surface: bool,
+) -> NDArray[np.float64]:
+    """Values (Z, P) at levels ``depth`` ((Z,) or (Z, P); None = no depth axis) -> (L, P) at the layer depths."""
+    n_z, n_p = values.shape
+    if depth is None:
+        return np.broadcast_to(values[0], (layers.size, n_p)).copy()
+    below = "first" if covers_surface else "land"
+    out = np.empty((layers.size, n_p))
+    if depth.ndim == 1:
+        aw = _axis_weights(depth, layers, below=below)
+        for l in range(layers.size):
+            if not aw.valid[l]:
+                out[l] = np.nan
+                continue
+            out[l] = _accumulate(
+                [(np.full(n_p, aw.w0[l]), values[aw.i0[l]]), (np.full(n_p, aw.w1[l]), values[aw.i1[l]])]
+            )
+        return out
+    # Per-column depths (s-levels): the same rules column by column.
+    cols = np.arange(n_p)
+    good_col = np.all(np.isfinite(depth), axis=0)
+    d = np.where(good_col[None, :], depth, 0.0)
+    tol = _elementwise_snap_tol(d)
+    for l, target in enumerate(layers):
+        near = np.abs(d - target) <= tol
+        snapped = near.any(axis=0)
+        snap_idx = np.argmax(near, axis=0)
+        k = np.sum(d <= target, axis=0) - 1  # last level at or above the target
+        before = (k < 0) & ~snapped
+        after = (k >= n_z - 1) & ~snapped
+        inside = ~before & ~after & ~snapped
+        k0 = np.where(snapped, snap_idx, np.where(inside, k, 0))
+        k1 = np.where(inside, np.minimum(k + 1, n_z - 1), k0)
+        span = d[k1, cols] - d[k0, cols]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w1 = np.where(inside, (target - d[k0, cols]) / np.where(span > 0, span, 1.0), 0.0)
+        w0 = np.where(inside, 1.0 - w1, 1.0)
+        valid = good_col & (snapped | inside | (before & covers_surface))
+        w0 = np.where(valid, w0, 0.0)
+        w1 = np.where(valid, w1, 0.0)
+        res = _accumulate([(w0, values[k0, cols]), (w1, values[k1, cols])])
+        out[l] = np.where(valid, res, np.nan)
+    return out
+
+
+def _is_periodic_lon(lon: NDArray[np.float64]) -> bool:
+    """A regular longitude axis that closes the circle (its last step back to the first is one spacing)."""
+    if lon.size < 3:
+        return False
+    step = float(np.median(np.diff(lon)))
+    return abs((lon[-1] - lon[0]) + step - 360.0) <= 0.01 * step
+
+
+def _shift_lon(x: NDArray[np.float64], lo: float, hi: float) -> NDArray[np.float64]:
+    """Move target longitudes by a multiple of 360 deg into [lo, hi] when they fall outside it."""
+    x = np.asarray(x, dtype=np.float64)
+    out = x.copy()
+    outside = (x < lo) | (x > hi)
+    if np.any(outside):
+        shifted = lo + np.mod(x - lo, 360.0)
+        ok = outside & (shifted <= hi)
+        out = np.where(ok, shifted, out)
+    return out
+
+
+def _resample_regular(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    lon_src, lat_src = forecast.lon_deg, forecast.lat_deg
+    n_x = lon_src.size
+    periodic = _is_periodic_lon(lon_src)
+    if periodic:
+        lon_axis = np.append(lon_src, lon_src[0] + 360.0)
+    else:
+        lon_axis = lon_src
+    tol = _axis_snap_tol(lon_axis)
+    tx = _shift_lon(grid.lon_deg, lon_axis[0] - tol, lon_axis[-1] + tol)
+    ax = _axis_weights(lon_axis, tx, below="land")
+    ay = _axis_weights(lat_src, grid.lat_deg, below="land")
+    ix0, ix1 = ax.i0 % n_x, ax.i1 % n_x
+
+    rows = np.unique(np.concatenate([ay.i0[ay.valid], ay.i1[ay.valid]]))
+    cols = np.unique(np.concatenate([ix0[ax.valid], ix1[ax.valid]]))
+    layers = grid.depth_m
+    shape = (layers.size, grid.ny, grid.nx)
+    if rows.size == 0 or cols.size == 0:
+        return np.full(shape, np.nan), np.full(shape, np.nan)
+
+    def column_depth() -> NDArray[np.float64] | None:
+        if forecast.depth_m is None or forecast.depth_m.ndim == 1:
+            return forecast.depth_m
+        d = forecast.depth_m[t][:, rows][:, :, cols]
+        return d.reshape(d.shape[0], -1)
+
+    depth = column_depth()
+    # Positions of the needed source rows/cols in the cropped block.
+    ry0, ry1 = np.searchsorted(rows, ay.i0), np.searchsorted(rows, ay.i1)
+    cx0, cx1 = np.searchsorted(cols, ix0), np.searchsorted(cols, ix1)
+    ry0, ry1 = np.clip(ry0, 0, rows.size - 1), np.clip(ry1, 0, rows.size - 1)
+    cx0, cx1 = np.clip(cx0, 0, cols.size - 1), np.clip(cx1, 0, cols.size - 1)
+    wy0, wy1 = ay.w0[:, None], ay.w1[:, None]
+    wx0, wx1 = ax.w0[None, :], ax.w1[None, :]
+    valid = ay.valid[:, None] & ax.valid[None, :]
+
+    results = []
+    for field in (forecast.u_east_m_s, forecast.v_north_m_s):
+        block = field[t][:, rows][:, :, cols]  # (Z, nr, nc)
+        nz = block.shape[0]
+        vert = _vertical(block.reshape(nz, -1), depth, layers, forecast.covers_surface)
+        vert = vert.reshape(layers.size, rows.size, cols.size)
+        corners = [
+            (wy0 * wx0, vert[:, ry0[:, None], cx0[None, :]]),
+            (wy0 * wx1, vert[:, ry0[:, None], cx1[None, :]]),
+            (wy1 * wx0, vert[:, ry1[:, None], cx0[None, :]]),
+            (wy1 * wx1, vert[:, ry1[:, None], cx1[None, :]]),
+        ]
+        terms = [(np.broadcast_to(w, shape), val) for w, val in corners]
+        out = _accumulate(terms)
+        out[:, ~valid] = np.nan
+        results.append(out)
+    return results[0], results[1]
+
+
+def _resample_curvilinear(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Per-column vertical interpolation, then barycentric weights on a Delaunay triangulation (spec section 1)."""
+    lon, lat = forecast.lon_deg, forecast.lat_deg
+    _, n_z, _, _ = forecast.shape
+    layers = grid.depth_m
+    shape = (layers.size, grid.ny, grid.nx)
+    lon_lo, lon_hi = float(np.nanmin(lon)), float(np.nanmax(lon))
+    glon, glat = np.meshgrid(_shift_lon(grid.lon_deg, lon_lo, lon_hi), grid.lat_deg)
+    nodes, weights, inside = _triangulation_weights(forecast, glon.ravel(), glat.ravel())
+
+    if forecast.depth_m is None or forecast.depth_m.ndim == 1:
+        depth = forecast.depth_m
+    else:
+        depth = forecast.depth_m[t].reshape(n_z, -1)
+    results = []
+    for field in (forecast.u_east_m_s, forecast.v_north_m_s):
+        vert = _vertical(field[t].reshape(n_z, -1), depth, layers, forecast.covers_surface)  # (L, P)
+        terms = [
+            (np.broadcast_to(weights[:, c], (layers.size, weights.shape[0])), vert[:, nodes[:, c]]) for c in range(3)
+        ]
+        out = _accumulate(terms)
+        out[:, ~inside] = np.nan
+        results.append(out.reshape(shape))
+    return results[0], results[1]
+
+
+def _triangulation_weights(
+    forecast: Forecast, qlon: NDArray[np.float64], qlat: NDArray[np.float64]
+) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.bool_]]:
+    """(flat source node indices (Q, 3), barycentric weights (Q, 3), inside hull (Q,)) for target points.
+
+    The plane is lon * cos(mean lat), lat. Weights below 1e-9 are snapped to 0 and the rest
+    renormalised, so a target on a source node or edge uses only that node or edge.
+    """
+    from scipy.spatial import ConvexHull, Delaunay, QhullError
+
+    lon, lat = forecast.lon_deg, forecast.lat_deg
+    ok = (np.isfinite(lon) & np.isfinite(lat)).ravel()
+    index = np.flatnonzero(ok)
+    scale = float(np.cos(np.radians(np.nanmean(lat))))
+    points = np.column_stack([lon.ravel()[ok] * scale, lat.ravel()[ok]])
+    q = np.column_stack([qlon * scale, qlat])
+    try:
+        tri = Delaunay(points)
+        hull = ConvexHull(points)
+    except QhullError as exc:
+        raise ForecastError(
+            f"{forecast.source}: cannot triangulate the forecast's 2-D lon/lat points ({exc}); expected a "
+            "non-degenerate grid"
+        ) from exc
+    # Targets clearly outside the hull never reach Delaunay.find_simplex (its fallback there is a
+    # brute-force search over every triangle).
+    eq = hull.equations
+    slack = 1e-9 * (1.0 + float(np.max(np.abs(points))))
+    candidate = np.all(q @ eq[:, :2].T + eq[:, 2] <= slack, axis=1)
+    simplex = np.full(q.shape[0], -1, dtype=np.intp)
+    if np.any(candidate):
+        simplex[candidate] = tri.find_simplex(q[candidate])
+    inside = simplex >= 0
+    verts = tri.simplices[np.where(inside, simplex, 0)]  # (Q, 3) into points
+    a, b, c = points[verts[:, 0]], points[verts[:, 1]], points[verts[:, 2]]
+    v0, v1, v2 = b - a, c - a, q - a
+    den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w1 = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
+        w2 = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
+    w = np.column_stack([1.0 - w1 - w2, w1, w2])
+    w = np.where(np.isfinite(w) & (w >= _BARY_SNAP), w, 0.0)
+    total = w.sum(axis=1, keepdims=True)
+    inside &= total[:, 0] > 0
+    w = np.where(inside[:, None], w / np.where(total > 0, total, 1.0), 0.0)
+    return index[verts], w, inside
+
+
+# --------------------------------------------------------------------------------------
+# Time lookup and description
+# --------------------------------------------------------------------------------------
+
+
+def nearest_time_index(forecast: Forecast, when: np.datetime64) -> int:
+    """Index of the forecast time nearest to ``when`` (ties: the earlier step).
+
+    Raises ForecastError when the forecast has no reference date, or when ``when`` lies more
+    than one time step before the first or after the last time (a one-step forecast allows one day).
+    """
+    if forecast.time_origin is None:
+        raise ForecastError(
+            f"{forecast.source}: the forecast's times have no reference date (units without 'since'); "
+            "choose the time step by position with --time-index"
+        )
+    try:
+        moment = np.datetime64(when, "ms")
+    except (ValueError, TypeError) as exc:
+        raise ForecastError(f"{forecast.source}: time: expected a numpy.datetime64; got {when!r}") from exc
+    if np.isnat(moment):
+        raise ForecastError(f"{forecast.source}: time: expected a date and time; got NaT")
+    origin = _parse_origin(forecast.time_origin, forecast.source)
+    offset_s = float((moment - origin) / np.timedelta64(1, "ms")) / 1000.0
+    times = forecast.time_s
+    step = float(np.median(np.diff(times))) if times.size > 1 else 86400.0
+    if offset_s < times[0] - step or offset_s > times[-1] + step:
+        first, last = _iso(forecast, times[0]), _iso(forecast, times[-1])
+        raise ForecastError(
+            f"{forecast.source}: time {moment.astype('datetime64[s]')}Z is outside the forecast ({first} .. {last}) "
+            f"by more than one time step ({step:g} s); choose a time within the forecast"
+        )
+    return int(np.argmin(np.abs(times - offset_s)))
+
+
+def _iso(forecast: Forecast, t_s: float) -> str:
+    if forecast.time_origin is None:
+        return f"{t_s:g} s"
+    origin = _parse_origin(forecast.time_origin, forecast.source)
+    return str((origin + np.timedelta64(int(round(t_s * 1000)), "ms")).astype("datetime64[s]")) + "Z"
+
+
+def describe(forecast: Forecast) -> str:
+    """Multi-line summary for ``lrauv forecast info FILE``."""
+    n_t, n_z, n_y, n_x = forecast.shape
+    lines = [f"source:     {forecast.source}", f"identity:   {forecast.identity}"]
+    if forecast.is_regular:
+        lines.append(f"layout:     regular lon/lat grid, {n_x} x {n_y} (lon x lat)")
+    else:
+        lines.append(f"layout:     curvilinear grid with 2-D lon/lat, {n_x} x {n_y} (x x y)")
+    if forecast.variables:
+        lines.append(f"variables:  {', '.join(forecast.variables)} -> eastward, northward (m/s)")
+    times = forecast.time_s
+    step = f", step {_duration(float(np.median(np.diff(times))))}" if times.size > 1 else ""
+    if forecast.time_origin is not None:
+        lines.append(f"time:       {n_t} steps, {_iso(forecast, times[0])} .. {_iso(forecast, times[-1])}{step}")
+    else:
+        lines.append(f"time:       {n_t} steps, {times[0]:g} .. {times[-1]:g} s (no reference date){step}")
+    depth = forecast.depth_m
+    if depth is None:
+        lines.append("depth:      none (the field applies to every layer)")
+    elif depth.ndim == 1:
+        lines.append(f"depth:      {depth.size} level(s): {', '.join(f'{d:g}' for d in depth)} m")
+    else:
+        d0 = depth[0]
+        lines.append(
+            f"depth:      {n_z} terrain-following levels per column; at time 0 the first level lies at "
+            f"{np.nanmin(d0[0]):.3g}..{np.nanmax(d0[0]):.3g} m, "
+            f"the last at {np.nanmin(d0[-1]):.3g}..{np.nanmax(d0[-1]):.3g} m"
+            + ("" if forecast.covers_surface else "; above the first level: not covered (land)")
+        )
+    lines.append(
+        f"lon:        {np.nanmin(forecast.lon_deg):.4f} .. {np.nanmax(forecast.lon_deg):.4f} deg E; "
+        f"lat: {np.nanmin(forecast.lat_deg):.4f} .. {np.nanmax(forecast.lat_deg):.4f} deg N"
+    )
+    u, v = forecast.u_east_m_s, forecast.v_north_m_s
+    water0 = np.isfinite(u[0, 0]) & np.isfinite(v[0, 0])
+    lines.append(f"land:       {100.0 * (1.0 - water0.mean()):.1f} % of points at time 0, first level")
+    speed = np.hypot(u, v)
+    speed = speed[np.isfinite(speed)]
+    if speed.size:
+        p50, p90, p99 = np.percentile(speed, [50, 90, 99])
+        lines.append(f"speed:      p50 {p50:.3f}, p90 {p90:.3f}, p99 {p99:.3f}, max {speed.max():.3f} m/s")
+    else:
+        lines.append("speed:      no water points")
+    if forecast.notes:
+        lines.append("notes:")
+        lines.extend(f"  - {n}" for n in forecast.notes)
+    return "\n".join(lines)
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("d", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size and abs(seconds / size - round(seconds / size)) < 1e-9:
+            return f"{seconds / size:g} {unit}"
+    return f"{seconds:g} s"
