@@ -96,6 +96,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except PlannerError as exc:
         print(f"lrauv: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except OSError as exc:  # a file we were told to read or write
+        where = exc.filename or "file"
+        print(f"lrauv: error: {where}: {exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("lrauv: interrupted", file=sys.stderr)
         return 130

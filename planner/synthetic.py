@@ -290,6 +290,7 @@ def write_synthetic(
     """
     target = pathlib.Path(path)
     ds = synthesize(settings, issue_number=issue_number)
+    target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     os.close(fd)
     tmp = pathlib.Path(tmp_name)
