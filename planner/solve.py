@@ -215,46 +215,65 @@ def solve(model: TransitionModel, goal: Goal, *, progress: bool = False) -> Solu
     )
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _build_predecessors(flow_dir, reach, lateral, robust, mask_h, mask_v, remaining):  # pragma: no cover
+PARALLEL_FROM_STATES = 2_000_000  # below this, starting threads costs more than it saves
+
+
+def _build_predecessors(flow_dir, reach, lateral, robust, mask_h, mask_v, remaining):  # type: ignore[no-untyped-def]
     """One forward pass: predecessor masks of every state and, for robust, outcome counts.
 
     ``mask_h`` bit ``b`` (b < 16: DRIFT, else FORWARD) and ``mask_v`` bit ``b``
     (b < 17: UP from the layer below, else DOWN from the layer above) name the
     predecessor by its displacement (``DISP_DI``/``DISP_DJ``). Targets keep the
-    source's heading, so the headings are independent and run in parallel.
+    source's heading, so headings are independent and large grids do them in parallel.
     """
+    driver = _preds_parallel if mask_h.size >= PARALLEL_FROM_STATES else _preds_serial
+    driver(flow_dir, reach, lateral, robust, mask_h, mask_v, remaining)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _preds_parallel(flow_dir, reach, lateral, robust, mask_h, mask_v, remaining):  # pragma: no cover
+    for k in numba.prange(8):
+        _preds_heading(np.int64(k), flow_dir, reach, lateral, robust, mask_h, mask_v, remaining)
+
+
+@numba.njit(cache=True, nogil=True)
+def _preds_serial(flow_dir, reach, lateral, robust, mask_h, mask_v, remaining):  # pragma: no cover
+    for k in range(8):
+        _preds_heading(k, flow_dir, reach, lateral, robust, mask_h, mask_v, remaining)
+
+
+@numba.njit(cache=True, nogil=True)
+def _preds_heading(k, flow_dir, reach, lateral, robust, mask_h, mask_v, remaining):  # pragma: no cover
+    """The forward pass for the states of one heading (all their outcomes keep it)."""
     L, ny, nx = flow_dir.shape
     one = np.uint64(1)
-    for kk in numba.prange(8):
-        k = np.int64(kk)
-        out = np.empty(3, dtype=np.int64)
-        for l in range(L):
-            for j in range(ny):
-                for i in range(nx):
-                    if flow_dir[l, j, i] == -2:
-                        continue
-                    s = ((k * L + l) * ny + j) * nx + i
-                    for ai in range(4):
-                        a = _MOVE_CODES[ai]
-                        n = outcomes_of(flow_dir, reach, lateral, l, j, i, k, a, out)
-                        if robust:
-                            remaining[s, ai] = n
-                        for q in range(n):
-                            t = out[q]
-                            if t == s:
-                                continue
-                            ti = t % nx
-                            tj = (t // nx) % ny
-                            disp = _DISP_INDEX_NB[tj - j + 2, ti - i + 2]
-                            if a == 0:
-                                mask_h[t] |= one << np.uint64(disp - 1)
-                            elif a == 1:
-                                mask_h[t] |= one << np.uint64(disp + 15)
-                            elif a == 4:
-                                mask_v[t] |= one << np.uint64(disp)
-                            else:
-                                mask_v[t] |= one << np.uint64(disp + 17)
+    out = np.empty(3, dtype=np.int64)
+    for l in range(L):
+        for j in range(ny):
+            for i in range(nx):
+                if flow_dir[l, j, i] == -2:
+                    continue
+                s = ((k * L + l) * ny + j) * nx + i
+                for ai in range(4):
+                    a = _MOVE_CODES[ai]
+                    n = outcomes_of(flow_dir, reach, lateral, l, j, i, k, a, out)
+                    if robust:
+                        remaining[s, ai] = n
+                    for q in range(n):
+                        t = out[q]
+                        if t == s:
+                            continue
+                        ti = t % nx
+                        tj = (t // nx) % ny
+                        disp = _DISP_INDEX_NB[tj - j + 2, ti - i + 2]
+                        if a == 0:
+                            mask_h[t] |= one << np.uint64(disp - 1)
+                        elif a == 1:
+                            mask_h[t] |= one << np.uint64(disp + 15)
+                        elif a == 4:
+                            mask_v[t] |= one << np.uint64(disp)
+                        else:
+                            mask_v[t] |= one << np.uint64(disp + 17)
 
 
 # Status codes of ``_search`` and the slots of the queue's counter array.
@@ -359,9 +378,7 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
             ctr[_LIVE] -= count
             head[b] = -1
             if m > 1:
-                order = np.argsort(cand_key[:m])
-                cand_state[:m] = cand_state[:m][order]
-                cand_key[:m] = cand_key[:m][order]
+                _sort_by_key(cand_state, cand_key, m)
             ctr[_P] = 0
             ctr[_M] = m
             ctr[_FHEAD] = 0
@@ -372,19 +389,29 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
         m = ctr[_M]
         fh = ctr[_FHEAD]
         ft = ctr[_FTAIL]
+        # Counters live in registers inside the loop and go back to ``ctr`` on return.
+        free = ctr[_FREE]
+        n_free = ctr[_NFREE]
+        used = ctr[_USED]
+        live = ctr[_LIVE]
+        n_settled = ctr[_SETTLED]
+        pool_size = pool_state.size
+        fifo_size = fifo_state.size
         while p < m or fh < ft:
             # Room for every push this state may make, or return to grow the buffers.
-            if ctr[_NFREE] + pool_state.size - ctr[_USED] < _ROOM:
+            if n_free + pool_size - used < _ROOM:
                 ctr[_P], ctr[_FHEAD], ctr[_FTAIL] = p, fh, ft
+                ctr[_FREE], ctr[_NFREE], ctr[_USED], ctr[_LIVE], ctr[_SETTLED] = free, n_free, used, live, n_settled
                 return _POOL_FULL
-            if fifo_state.size - ft < _ROOM:
+            if fifo_size - ft < _ROOM:
                 if fh > 0:
                     n_live = ft - fh
                     fifo_state[:n_live] = fifo_state[fh:ft].copy()
                     fifo_key[:n_live] = fifo_key[fh:ft].copy()
                     fh, ft = 0, n_live
-                if fifo_state.size - ft < _ROOM:
+                if fifo_size - ft < _ROOM:
                     ctr[_P], ctr[_FHEAD], ctr[_FTAIL] = p, fh, ft
+                    ctr[_FREE], ctr[_NFREE], ctr[_USED], ctr[_LIVE], ctr[_SETTLED] = free, n_free, used, live, n_settled
                     return _FIFO_FULL
             if fh < ft and (p >= m or fifo_key[fh] < cand_key[p]):
                 s = fifo_state[fh]
@@ -397,7 +424,7 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
             if settled[s] != 0 or packed[s] != key:
                 continue
             settled[s] = 1
-            ctr[_SETTLED] += 1
+            n_settled += 1
             i = s % nx
             j = (s // nx) % ny
             l = (s // (nx * ny)) % L
@@ -444,22 +471,54 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
                         fifo_key[ft] = packed[src]
                         ft += 1
                     else:
-                        free = ctr[_FREE]
                         if free != -1:
                             node = free
-                            ctr[_FREE] = pool_next[node]
-                            ctr[_NFREE] -= 1
+                            free = pool_next[node]
+                            n_free -= 1
                         else:
-                            node = ctr[_USED]
-                            ctr[_USED] += 1
+                            node = used
+                            used += 1
                         bb = (c + costs[a]) % n_buckets
                         pool_state[node] = src
                         pool_key[node] = packed[src]
                         pool_next[node] = head[bb]
                         head[bb] = node
-                        ctr[_LIVE] += 1
+                        live += 1
+        ctr[_FREE], ctr[_NFREE], ctr[_USED], ctr[_LIVE], ctr[_SETTLED] = free, n_free, used, live, n_settled
         ctr[_IN_BUCKET] = 0
         ctr[_COST] += 1
+
+@numba.njit(cache=True, nogil=True)
+def _sort_by_key(states, keys, m):  # pragma: no cover
+    """Sort the first ``m`` entries by key: a counting sort when the keys span little, else argsort."""
+    lo = keys[0]
+    hi = keys[0]
+    for n in range(1, m):
+        if keys[n] < lo:
+            lo = keys[n]
+        elif keys[n] > hi:
+            hi = keys[n]
+    span = hi - lo + 1
+    if span > 4 * m + 64:
+        order = np.argsort(keys[:m])
+        states[:m] = states[:m][order]
+        keys[:m] = keys[:m][order]
+        return
+    counts = np.zeros(span + 1, dtype=np.int64)
+    for n in range(m):
+        counts[keys[n] - lo + 1] += 1
+    for n in range(span):
+        counts[n + 1] += counts[n]
+    out_s = np.empty(m, dtype=np.int64)
+    out_k = np.empty(m, dtype=np.int64)
+    for n in range(m):
+        slot = counts[keys[n] - lo]
+        counts[keys[n] - lo] = slot + 1
+        out_s[slot] = states[n]
+        out_k[slot] = keys[n]
+    states[:m] = out_s
+    keys[:m] = out_k
+
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _relax(src, a, key, costs, packed, action, settled):  # pragma: no cover
