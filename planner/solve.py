@@ -277,23 +277,25 @@ def _preds_heading(k, flow_dir, reach, lateral, robust, mask_h, mask_v, remainin
 
 
 # Status codes of ``_search`` and the slots of the queue's counter array.
-_DONE, _BUDGET, _POOL_FULL, _FIFO_FULL, _BUCKET_TOO_BIG = 0, 1, 2, 3, 4
-_LIVE, _USED, _FREE, _NFREE, _COST, _P, _M, _FHEAD, _FTAIL, _IN_BUCKET, _SETTLED, _NEED = range(12)
+_DONE, _BUDGET, _BUCKETS_FULL, _FIFO_FULL, _BUCKET_TOO_BIG = 0, 1, 2, 3, 4
+_LIVE, _COST, _P, _M, _FHEAD, _FTAIL, _IN_BUCKET, _SETTLED, _NEED = range(9)
 _ROOM = 40  # queue slots one settled state may need: 2 rotations + 34 mask bits
 
 
 @dataclass(eq=False)
 class _BucketQueue:
-    """Dial's bucket queue over cost as linked lists in one pool, plus the open bucket.
+    """Dial's bucket queue over cost: one contiguous array per cost modulo ``n_buckets``.
 
-    The arrays are grown here, between calls of ``_search``, never inside it:
-    rebinding arrays inside a numba loop costs a reference count per access.
+    ``bucket_state``/``bucket_key`` are ``(n_buckets, capacity)`` with ``count`` entries
+    used per row; appends and the gather of a bucket are sequential in memory. The
+    open bucket's entries, sorted, sit in ``cand_*``; zero-cost moves go to the FIFO.
+    Arrays grow here, between calls of ``_search``, never inside it: rebinding
+    arrays inside a numba loop costs a reference count per access.
     """
 
-    pool_state: NDArray[np.int64]
-    pool_key: NDArray[np.int64]
-    pool_next: NDArray[np.int64]
-    head: NDArray[np.int64]
+    bucket_state: NDArray[np.int64]
+    bucket_key: NDArray[np.int64]
+    count: NDArray[np.int64]
     cand_state: NDArray[np.int64]
     cand_key: NDArray[np.int64]
     fifo_state: NDArray[np.int64]
@@ -304,26 +306,24 @@ class _BucketQueue:
     def start(cls, goal_states: NDArray[np.int64], *, n_buckets: int) -> _BucketQueue:
         n = goal_states.size
         cap = max(4096, 2 * n)
-        pool_next = np.full(cap, -1, dtype=np.int64)
-        pool_next[: n - 1] = np.arange(1, n)
-        head = np.full(n_buckets, -1, dtype=np.int64)
-        head[0] = 0 if n else -1
-        pool_state = np.zeros(cap, dtype=np.int64)
-        pool_state[:n] = goal_states
-        ctr = np.zeros(12, dtype=np.int64)
-        ctr[_LIVE], ctr[_USED], ctr[_FREE] = n, n, -1
+        bucket_state = np.zeros((n_buckets, cap), dtype=np.int64)
+        bucket_state[0, :n] = goal_states
+        count = np.zeros(n_buckets, dtype=np.int64)
+        count[0] = n
+        ctr = np.zeros(9, dtype=np.int64)
+        ctr[_LIVE] = n
         empty = np.zeros(4096, dtype=np.int64)
-        return cls(pool_state, np.zeros(cap, dtype=np.int64), pool_next, head,
-                   empty.copy(), empty.copy(), empty.copy(), empty.copy(), ctr)
+        return cls(bucket_state, np.zeros((n_buckets, cap), dtype=np.int64), count,
+                   np.zeros(cap, dtype=np.int64), np.zeros(cap, dtype=np.int64), empty.copy(), empty.copy(), ctr)
 
     def arrays(self) -> tuple[NDArray[np.int64], ...]:
-        return (self.pool_state, self.pool_key, self.pool_next, self.head, self.cand_state,
-                self.cand_key, self.fifo_state, self.fifo_key, self.ctr)
+        return (self.bucket_state, self.bucket_key, self.count, self.cand_state, self.cand_key,
+                self.fifo_state, self.fifo_key, self.ctr)
 
     def grow(self, status: int) -> None:
-        if status == _POOL_FULL:
-            self.pool_state, self.pool_key, self.pool_next = (
-                np.concatenate([a, np.zeros_like(a)]) for a in (self.pool_state, self.pool_key, self.pool_next)
+        if status == _BUCKETS_FULL:
+            self.bucket_state, self.bucket_key = (
+                np.concatenate([a, np.zeros_like(a)], axis=1) for a in (self.bucket_state, self.bucket_key)
             )
         elif status == _FIFO_FULL:
             self.fifo_state, self.fifo_key = (np.concatenate([a, np.zeros_like(a)]) for a in (self.fifo_state, self.fifo_key))
@@ -334,17 +334,22 @@ class _BucketQueue:
 
 @numba.njit(cache=True, nogil=True)
 def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action, settled,  # pragma: no cover
-            pool_state, pool_key, pool_next, head, cand_state, cand_key, fifo_state, fifo_key, ctr, budget):
+            bucket_state, bucket_key, count, cand_state, cand_key, fifo_state, fifo_key, ctr, budget):
     """Settle states in value order until done, ``budget`` more are settled, or a buffer is full.
 
     Inside the open bucket (cost ``c``), states are taken in order of steps from
     two sorted sources: ``cand`` (queued from earlier buckets, sorted on opening)
     and the FIFO of zero-cost moves made in this bucket.
     """
-    n_buckets = head.size
+    n_buckets = count.size
+    cap = bucket_state.shape[1]
     slab = L * ny * nx
     one = np.uint64(1)
     stop_at = ctr[_SETTLED] + budget
+    # The buckets the moves of one settled state can reach: check their room once per state.
+    targets = np.empty(6, dtype=np.int64)
+    for a in range(6):
+        targets[a] = costs[a] % n_buckets
     while True:
         if ctr[_IN_BUCKET] == 0:
             if ctr[_LIVE] == 0:
@@ -352,31 +357,19 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
             if ctr[_SETTLED] >= stop_at:
                 return _BUDGET
             b = ctr[_COST] % n_buckets
-            count = 0
-            node = head[b]
-            while node != -1:
-                count += 1
-                node = pool_next[node]
-            if count > cand_state.size:
-                ctr[_NEED] = count
+            size = count[b]
+            if size > cand_state.size:
+                ctr[_NEED] = size
                 return _BUCKET_TOO_BIG
             m = 0
-            node = head[b]
-            free = ctr[_FREE]
-            while node != -1:
-                nxt = pool_next[node]
-                st = pool_state[node]
-                if settled[st] == 0 and packed[st] == pool_key[node]:
+            for n in range(size):
+                st = bucket_state[b, n]
+                if settled[st] == 0 and packed[st] == bucket_key[b, n]:
                     cand_state[m] = st
-                    cand_key[m] = pool_key[node]
+                    cand_key[m] = bucket_key[b, n]
                     m += 1
-                pool_next[node] = free
-                free = node
-                node = nxt
-            ctr[_FREE] = free
-            ctr[_NFREE] += count
-            ctr[_LIVE] -= count
-            head[b] = -1
+            ctr[_LIVE] -= size
+            count[b] = 0
             if m > 1:
                 _sort_by_key(cand_state, cand_key, m)
             ctr[_P] = 0
@@ -389,20 +382,18 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
         m = ctr[_M]
         fh = ctr[_FHEAD]
         ft = ctr[_FTAIL]
-        # Counters live in registers inside the loop and go back to ``ctr`` on return.
-        free = ctr[_FREE]
-        n_free = ctr[_NFREE]
-        used = ctr[_USED]
         live = ctr[_LIVE]
         n_settled = ctr[_SETTLED]
-        pool_size = pool_state.size
         fifo_size = fifo_state.size
         while p < m or fh < ft:
             # Room for every push this state may make, or return to grow the buffers.
-            if n_free + pool_size - used < _ROOM:
-                ctr[_P], ctr[_FHEAD], ctr[_FTAIL] = p, fh, ft
-                ctr[_FREE], ctr[_NFREE], ctr[_USED], ctr[_LIVE], ctr[_SETTLED] = free, n_free, used, live, n_settled
-                return _POOL_FULL
+            full = False
+            for a in range(6):
+                if costs[a] > 0 and count[(c + targets[a]) % n_buckets] + _ROOM > cap:
+                    full = True
+            if full:
+                ctr[_P], ctr[_FHEAD], ctr[_FTAIL], ctr[_LIVE], ctr[_SETTLED] = p, fh, ft, live, n_settled
+                return _BUCKETS_FULL
             if fifo_size - ft < _ROOM:
                 if fh > 0:
                     n_live = ft - fh
@@ -410,8 +401,7 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
                     fifo_key[:n_live] = fifo_key[fh:ft].copy()
                     fh, ft = 0, n_live
                 if fifo_size - ft < _ROOM:
-                    ctr[_P], ctr[_FHEAD], ctr[_FTAIL] = p, fh, ft
-                    ctr[_FREE], ctr[_NFREE], ctr[_USED], ctr[_LIVE], ctr[_SETTLED] = free, n_free, used, live, n_settled
+                    ctr[_P], ctr[_FHEAD], ctr[_FTAIL], ctr[_LIVE], ctr[_SETTLED] = p, fh, ft, live, n_settled
                     return _FIFO_FULL
             if fh < ft and (p >= m or fifo_key[fh] < cand_key[p]):
                 s = fifo_state[fh]
@@ -471,22 +461,16 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
                         fifo_key[ft] = packed[src]
                         ft += 1
                     else:
-                        if free != -1:
-                            node = free
-                            free = pool_next[node]
-                            n_free -= 1
-                        else:
-                            node = used
-                            used += 1
                         bb = (c + costs[a]) % n_buckets
-                        pool_state[node] = src
-                        pool_key[node] = packed[src]
-                        pool_next[node] = head[bb]
-                        head[bb] = node
+                        n = count[bb]
+                        bucket_state[bb, n] = src
+                        bucket_key[bb, n] = packed[src]
+                        count[bb] = n + 1
                         live += 1
-        ctr[_FREE], ctr[_NFREE], ctr[_USED], ctr[_LIVE], ctr[_SETTLED] = free, n_free, used, live, n_settled
+        ctr[_LIVE], ctr[_SETTLED] = live, n_settled
         ctr[_IN_BUCKET] = 0
         ctr[_COST] += 1
+
 
 @numba.njit(cache=True, nogil=True)
 def _sort_by_key(states, keys, m):  # pragma: no cover
