@@ -193,7 +193,7 @@ def _plan(args: argparse.Namespace) -> int:
         print(f"planning on {forecast_path} ({settings.criterion}, {settings.uncertainty})", file=sys.stderr)
     result = make_plan(request, progress=progress)
     data = result.table.to_bytes(compress=not args.no_compress)
-    from planner.table import write_atomic
+    from planner.atomic import write_atomic
 
     write_atomic(out, data)
     sol = result.solution

@@ -17,7 +17,8 @@ from planner.forecast import Forecast, nearest_time_index, open_forecast, resamp
 from planner.grid import BBox, Grid
 from planner.settings import Goal, PlanSettings
 from planner.solve import Solution, solve
-from planner.table import PolicyTable, write_atomic
+from planner.atomic import write_atomic
+from planner.table import PolicyTable
 from planner.transitions import TransitionModel, build_transitions
 
 

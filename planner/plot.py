@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.actions import Action
+from planner.atomic import atomic_target
 from planner.errors import PlannerError
 from planner.headings import DI, DJ, N_HEADINGS, Direction
 
@@ -516,17 +516,9 @@ def _figure(mpl: Any, width_in: float, height_in: float) -> Any:
 
 def _save(fig: Any, path: str | os.PathLike[str]) -> Path:
     """Write ``fig`` as PNG to ``path`` atomically; returns the path."""
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
+    with atomic_target(path) as tmp:
         fig.savefig(tmp, format="png", dpi=DPI, facecolor="white")
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return target
+    return Path(path)
 
 
 def _cos_lat(grid: Grid) -> float:

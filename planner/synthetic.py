@@ -59,13 +59,13 @@ import datetime as dt
 import functools
 import os
 import pathlib
-import tempfile
 from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
+from planner.atomic import atomic_target
 from planner.errors import PlannerError
 
 __all__ = [
@@ -290,20 +290,9 @@ def write_synthetic(
     """
     target = pathlib.Path(path)
     ds = synthesize(settings, issue_number=issue_number)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    os.close(fd)
-    tmp = pathlib.Path(tmp_name)
-    try:
+    with atomic_target(target) as tmp:
         ds_file = _with_numeric_time(ds)
         ds_file.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=_encoding(ds_file))
-        with open(tmp, "rb") as handle:
-            os.fsync(handle.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
     return target
 
 

@@ -12,7 +12,6 @@ import json
 import math
 import os
 import struct
-import tempfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.actions import Action
+from planner.atomic import write_atomic
 from planner.errors import TableError
 from planner.headings import N_HEADINGS, bearings_deg, cell_size_m
 
@@ -358,23 +358,6 @@ class PolicyTable:
         """Fields that differ from another table's grid or goal (empty when compatible)."""
         mine, theirs = self.header(), other.header()
         return [key for key in ("grid", "goal") if mine[key] != theirs[key]]
-
-
-def write_atomic(path: str | os.PathLike[str], data: bytes) -> Path:
-    """Write bytes to ``path`` via a temporary file and ``os.replace``: never half-written."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return target
 
 
 def _payload_len(n_cells: int) -> int:
