@@ -1550,7 +1550,7 @@ def _resample_regular(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[n
 
 def _resample_curvilinear(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per-column vertical interpolation, then barycentric weights on a Delaunay triangulation (spec section 1)."""
-    lon, lat = forecast.lon_deg, forecast.lat_deg
+    lon = forecast.lon_deg
     _, n_z, _, _ = forecast.shape
     layers = grid.depth_m
     shape = (layers.size, grid.ny, grid.nx)

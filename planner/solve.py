@@ -29,7 +29,7 @@ from planner.actions import Action
 from planner.errors import GoalError
 from planner.headings import DI, DJ, N_HEADINGS
 from planner.settings import Goal
-from planner.transitions import FLOW_LAND, TransitionModel, outcomes_of
+from planner.transitions import TransitionModel, outcomes_of
 
 UNREACHED = np.iinfo(np.int64).max
 STEPS_BITS = 32

@@ -68,7 +68,7 @@ def test_unknown_top_level_key_and_bad_yaml(tmp_path):
 
 
 def test_too_many_goals(tmp_path):
-    goals = "".join(f"  - {{lat_deg: 33.4, lon_deg: -117.8, depth_m: 0}}\n" for _ in range(10_000))
+    goals = "".join("  - {lat_deg: 33.4, lon_deg: -117.8, depth_m: 0}\n" for _ in range(10_000))
     text = (REPO / "missions" / "demo.yaml").read_text()
     start = text.index("goals:")
     end = text.index("replanning:")
