@@ -26,9 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.actions import Action
-from planner.errors import GoalError
+from planner.errors import GoalError, GridError
 from planner.headings import DI, DJ, N_HEADINGS
 from planner.settings import Goal
+from planner.table import MAX_STATES
 from planner.transitions import TransitionModel, outcomes_of
 
 UNREACHED = np.iinfo(np.int64).max
@@ -171,6 +172,8 @@ def solve(model: TransitionModel, goal: Goal, *, progress: bool = False) -> Solu
     """
     goal_cells = locate_goal(model, goal)
     grid = model.grid
+    if grid.n_states >= MAX_STATES:
+        raise GridError(f"grid: {grid.n_states:,} states; the solver and the table hold at most {MAX_STATES - 1:,}")
     robust = model.settings.criterion == "robust"
     n_states = grid.n_states
     mask_h = np.zeros(n_states, dtype=np.uint64)
@@ -293,7 +296,7 @@ class _BucketQueue:
     arrays inside a numba loop costs a reference count per access.
     """
 
-    bucket_state: NDArray[np.int64]
+    bucket_state: NDArray[np.int32]
     bucket_key: NDArray[np.int64]
     count: NDArray[np.int64]
     cand_state: NDArray[np.int64]
@@ -306,7 +309,7 @@ class _BucketQueue:
     def start(cls, goal_states: NDArray[np.int64], *, n_buckets: int) -> _BucketQueue:
         n = goal_states.size
         cap = max(4096, 2 * n)
-        bucket_state = np.zeros((n_buckets, cap), dtype=np.int64)
+        bucket_state = np.zeros((n_buckets, cap), dtype=np.int32)  # state indices < 2**31 (table.MAX_STATES)
         bucket_state[0, :n] = goal_states
         count = np.zeros(n_buckets, dtype=np.int64)
         count[0] = n
