@@ -13,7 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.errors import ForecastError, GridError
-from planner.forecast import Forecast, nearest_time_index, open_forecast, resample
+from planner.forecast import Forecast, nearest_time_index, open_forecast
+from planner.resample import resample
 from planner.grid import BBox, Grid
 from planner.settings import Goal, PlanSettings
 from planner.solve import Solution, solve

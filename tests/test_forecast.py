@@ -20,7 +20,8 @@ import pytest
 import xarray as xr
 
 from planner.errors import ForecastError
-from planner.forecast import Forecast, describe, nearest_time_index, open_forecast, resample
+from planner.forecast import Forecast, describe, nearest_time_index, open_forecast
+from planner.resample import resample
 from planner.grid import BBox, Grid
 
 DATA_DIR = Path(
