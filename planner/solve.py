@@ -258,7 +258,7 @@ def _preds_heading(k, flow_dir, reach, lateral, robust, mask_h, mask_v, remainin
                     continue
                 s = ((k * L + l) * ny + j) * nx + i
                 for ai in range(4):
-                    a = _MOVE_CODES[ai]
+                    a = MOVE_CODES[ai]
                     n = outcomes_of(flow_dir, reach, lateral, l, j, i, k, a, out)
                     if robust:
                         remaining[s, ai] = n
@@ -268,7 +268,7 @@ def _preds_heading(k, flow_dir, reach, lateral, robust, mask_h, mask_v, remainin
                             continue
                         ti = t % nx
                         tj = (t // nx) % ny
-                        disp = _DISP_INDEX_NB[tj - j + 2, ti - i + 2]
+                        disp = _DISP_INDEX[tj - j + 2, ti - i + 2]
                         if a == 0:
                             mask_h[t] |= one << np.uint64(disp - 1)
                         elif a == 1:
@@ -450,7 +450,7 @@ def _search(L, ny, nx, mask_h, mask_v, remaining, costs, robust, packed, action,
                             disp = bit if bit < 17 else bit - 17
                             ai = 2 if bit < 17 else 3
                             ls = l + 1 if bit < 17 else l - 1
-                        src = ((k * L + ls) * ny + j - _DISP_DJ_NB[disp]) * nx + i - _DISP_DI_NB[disp]
+                        src = ((k * L + ls) * ny + j - DISP_DJ[disp]) * nx + i - DISP_DI[disp]
                         if settled[src] != 0:
                             continue
                         if robust:
@@ -528,10 +528,6 @@ def _relax(src, a, key, costs, packed, action, settled):  # pragma: no cover
     return False
 
 
-_MOVE_CODES = MOVE_CODES
-_DISP_INDEX_NB = _DISP_INDEX
-_DISP_DI_NB = DISP_DI
-_DISP_DJ_NB = DISP_DJ
 # Trailing-zero count of a 64-bit power of two by a de Bruijn multiply.
 _DEBRUIJN = np.uint64(0x03F79D71B4CA8B09)
 _CTZ_TABLE = np.zeros(64, dtype=np.int64)

@@ -14,6 +14,7 @@ import os
 import struct
 import zlib
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Literal
 
@@ -349,9 +350,9 @@ class PolicyTable:
             raise TableError(f"{p}: cannot read: {exc.strerror}") from None
         return cls.from_bytes(data, name=str(p))
 
-    @property
+    @cached_property
     def crc32(self) -> int:
-        """CRC32 of the compressed serialisation: the table's identity in logs."""
+        """CRC32 of the compressed serialisation: the table's identity in logs (computed once)."""
         return int.from_bytes(self.to_bytes()[-4:], "little")
 
     def matches(self, other: PolicyTable) -> list[str]:

@@ -139,8 +139,7 @@ def build_transitions(
                 f"layer {l} at {grid.depth_m[l]:g} m is all land on this grid; "
                 "choose shallower --depths or a bbox with water at that depth"
             )
-    for arr in (flow,):
-        arr.setflags(write=False)
+    flow.setflags(write=False)
     reach = reach_table(water)
     reach.setflags(write=False)
     costs = np.array(settings.costs.as_list(), dtype=np.int64)
