@@ -1,0 +1,354 @@
+"""The executive's decision logic: one pure ``step`` per telemetry update, no I/O.
+
+``step(helm, vehicle, table, config, now_s=..., link_ok=...) -> Tick`` takes the
+helm's previous state, the latest ``VehicleState`` and the policy table, and
+returns the next helm state, the commands to send and the events to log. The
+loop (``executive.loop``) does all sockets, clocks and files around it, so the
+same function runs live, in tests without sockets, and in replay.
+
+Action mapping (ArduSub semantics, research/executive-anchors.md section 2.3):
+
+| action | mode | target |
+|---|---|---|
+| FORWARD | GUIDED | velocity along ``bearing_k(j)`` at cruise speed + yaw, re-sent every ``refresh_s`` (ArduSub drops velocity targets after 3 s) |
+| ROTATE_LEFT/RIGHT | GUIDED | zero velocity + yaw to ``bearing_{k+-1}(j)``; held until the heading bin is reached |
+| DRIFT | ALT_HOLD | depth of the current layer (no horizontal thrust: the current carries the vehicle) |
+| UP / DOWN | ALT_HOLD | depth of the neighbouring layer; held until that depth is reached |
+
+GUIDED with zero velocity is station keeping on ArduSub, not drifting; that is
+why DRIFT and the glides (which drift along ``w``, spec section 5) use ALT_HOLD.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+from executive.state import (
+    Arm,
+    Command,
+    DepthTarget,
+    Event,
+    Phase,
+    PositionTarget,
+    SetMessageInterval,
+    SetMode,
+    Situation,
+    SubMode,
+    VehicleState,
+    VelocityYaw,
+)
+from planner.actions import Action
+from planner.table import PolicyTable
+
+OnArrival = Literal["hold", "surface", "drift", "next"]
+
+# Telemetry the executive asks for (message, interval in vehicle seconds); position and
+# attitude drive decisions, the rest is health. Intervals <= 0 disable a stream.
+DEFAULT_RATES: tuple[tuple[str, float], ...] = (
+    ("GLOBAL_POSITION_INT", 0.5),
+    ("ATTITUDE", 0.5),
+    ("SYSTEM_TIME", 5.0),
+    ("EKF_STATUS_REPORT", 5.0),
+    ("BATTERY_STATUS", 5.0),
+    ("SYS_STATUS", 5.0),
+    ("VFR_HUD", 5.0),
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HelmConfig:
+    """Parameters of the helm; vehicle figures come from the mission's ``vehicle`` section."""
+
+    cruise_speed_m_s: float = 1.0
+    yaw_rate_deg_s: float = 10.0
+    glide_rate_m_s: float = 0.2
+    on_arrival: OnArrival = "hold"
+    refresh_s: float = 1.0  # re-send the active target (velocity targets expire after 3 s)
+    retry_s: float = 2.0  # mode and arming requests
+    link_loss_timeout_s: float = 30.0
+    depth_tolerance_m: float = 0.5
+    max_mission_time_s: float | None = None
+    min_battery_pct: float | None = None
+    max_depth_m: float | None = None
+    rates: tuple[tuple[str, float], ...] = DEFAULT_RATES
+
+
+@dataclass(frozen=True, slots=True)
+class Activity:
+    """What the vehicle is being made to do, and why."""
+
+    situation: Situation
+    action: Action | None  # the table's action when following it
+    cell: tuple[int, int, int, int] | None  # (l, j, i, k) when inside the grid
+    mode: SubMode
+    target: Command | None  # streamed while this activity lasts
+    started_s: float
+    completes: bool = False  # ROTATE/UP/DOWN: held until done, not only until the state changes
+    goal_k: int | None = None
+    goal_depth_m: float | None = None
+    timeout_s: float | None = None
+
+    @property
+    def key(self) -> tuple[object, ...]:
+        return (self.situation, self.action, self.cell)
+
+
+@dataclass(frozen=True, slots=True)
+class HelmState:
+    phase: Phase = Phase.WAIT_LINK
+    activity: Activity | None = None
+    target_sent_s: float | None = None
+    mode_request_s: float | None = None
+    arm_request_s: float | None = None
+    rates_sent: bool = False
+    mission_start_s: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    """One consultation of the table: the audit record of the decision channel."""
+
+    time_s: float
+    lat_deg: float
+    lon_deg: float
+    depth_m: float
+    heading_deg: float | None
+    cell: tuple[int, int, int, int] | None
+    situation: Situation
+    action: Action | None
+    mode: SubMode
+    changed: bool  # a new activity started on this update
+
+
+@dataclass(frozen=True, slots=True)
+class Tick:
+    helm: HelmState
+    commands: tuple[Command, ...] = ()
+    events: tuple[Event, ...] = ()
+    decision: Decision | None = None
+
+
+@dataclass(slots=True)
+class _Out:
+    commands: list[Command] = field(default_factory=list)
+    events: list[Event] = field(default_factory=list)
+
+
+def step(
+    helm: HelmState,
+    vehicle: VehicleState,
+    table: PolicyTable | None,
+    config: HelmConfig,
+    *,
+    now_s: float,
+    link_ok: bool,
+) -> Tick:
+    """Advance the helm by one update at vehicle time ``now_s``."""
+    out = _Out()
+    if not link_ok:
+        return _link_lost(helm, config, now_s, out)
+    if helm.phase in (Phase.WAIT_LINK, Phase.LINK_LOST):
+        text = "autopilot heartbeat received" if helm.phase is Phase.WAIT_LINK else "link regained: setting up again"
+        out.events.append(Event("info", text))
+        helm = replace(helm, phase=Phase.SETUP, rates_sent=False, activity=None, target_sent_s=None)
+    if helm.phase is Phase.SETUP:
+        helm = _setup(helm, vehicle, table, config, now_s, out)
+        if helm.phase is Phase.SETUP:
+            return Tick(helm, tuple(out.commands), tuple(out.events))
+    if not vehicle.has_position:
+        return Tick(helm, tuple(out.commands), tuple(out.events))
+    helm, changed = _choose(helm, vehicle, table, config, now_s, out)
+    helm = _realise(helm, vehicle, config, now_s, out)
+    act = helm.activity
+    assert act is not None
+    decision = Decision(
+        time_s=now_s,
+        lat_deg=vehicle.lat_deg,  # type: ignore[arg-type]
+        lon_deg=vehicle.lon_deg,  # type: ignore[arg-type]
+        depth_m=vehicle.depth_m,  # type: ignore[arg-type]
+        heading_deg=vehicle.heading_deg,
+        cell=act.cell,
+        situation=act.situation,
+        action=act.action,
+        mode=act.mode,
+        changed=changed,
+    )
+    return Tick(helm, tuple(out.commands), tuple(out.events), decision)
+
+
+# -- phases -------------------------------------------------------------------------
+
+
+def _due(last_s: float | None, now_s: float, period_s: float) -> bool:
+    return last_s is None or now_s - last_s >= period_s or now_s < last_s
+
+
+def _link_lost(helm: HelmState, config: HelmConfig, now_s: float, out: _Out) -> Tick:
+    if helm.phase is Phase.WAIT_LINK:
+        return Tick(helm)
+    if helm.phase is not Phase.LINK_LOST:
+        out.events.append(Event("error", f"link lost: no autopilot heartbeat for {config.link_loss_timeout_s:g} s; asking for SURFACE"))
+        helm = replace(helm, phase=Phase.LINK_LOST, mode_request_s=None)
+    # Best effort: if only the downlink is lost the vehicle still hears this.
+    if _due(helm.mode_request_s, now_s, config.retry_s):
+        out.commands.append(SetMode(SubMode.SURFACE))
+        helm = replace(helm, mode_request_s=now_s)
+    return Tick(helm, tuple(out.commands), tuple(out.events))
+
+
+def _setup(
+    helm: HelmState, vehicle: VehicleState, table: PolicyTable | None, config: HelmConfig, now_s: float, out: _Out
+) -> HelmState:
+    if not helm.rates_sent:
+        out.commands.extend(SetMessageInterval(name, interval) for name, interval in config.rates)
+        helm = replace(helm, rates_sent=True)
+    if not vehicle.has_position:
+        return helm
+    if table is None:
+        return replace(helm, phase=Phase.RUNNING)  # "no table" is handled there: surface
+    if vehicle.mode != SubMode.GUIDED and _due(helm.mode_request_s, now_s, config.retry_s):
+        out.commands.append(SetMode(SubMode.GUIDED))  # refused until the position estimate exists
+        helm = replace(helm, mode_request_s=now_s)
+    if not vehicle.armed and _due(helm.arm_request_s, now_s, config.retry_s):
+        out.commands.append(Arm(True))
+        helm = replace(helm, arm_request_s=now_s)
+    if vehicle.armed and vehicle.mode == SubMode.GUIDED:
+        start = helm.mission_start_s if helm.mission_start_s is not None else now_s
+        out.events.append(Event("info", "armed in GUIDED: following the policy"))
+        helm = replace(helm, phase=Phase.RUNNING, mission_start_s=start, activity=None)
+    return helm
+
+
+def _safety(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float) -> tuple[Situation, str] | None:
+    if config.max_mission_time_s is not None and helm.mission_start_s is not None:
+        elapsed = now_s - helm.mission_start_s
+        if elapsed > config.max_mission_time_s:
+            return Situation.MISSION_TIME, f"mission time {elapsed / 3600:.2f} h exceeds max_mission_time_h {config.max_mission_time_s / 3600:g}"
+    if config.min_battery_pct is not None and vehicle.battery_pct is not None and vehicle.battery_pct < config.min_battery_pct:
+        return Situation.LOW_BATTERY, f"battery {vehicle.battery_pct:.0f} % is under min_battery_pct {config.min_battery_pct:g}"
+    if config.max_depth_m is not None and vehicle.depth_m is not None and vehicle.depth_m > config.max_depth_m:
+        return Situation.TOO_DEEP, f"depth {vehicle.depth_m:.1f} m exceeds max_depth_m {config.max_depth_m:g}"
+    return None
+
+
+def _choose(
+    helm: HelmState, vehicle: VehicleState, table: PolicyTable | None, config: HelmConfig, now_s: float, out: _Out
+) -> tuple[HelmState, bool]:
+    """Pick the activity for this update; returns the new helm state and whether it changed."""
+    current = helm.activity
+    if helm.phase is Phase.SAFE:
+        return helm, False
+    breach = _safety(helm, vehicle, config, now_s)
+    if breach is not None:
+        situation, text = breach
+        out.events.append(Event("error", f"{text}: surfacing, plan suspended"))
+        act = Activity(situation=situation, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
+        return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_request_s=None), True
+    if helm.phase is Phase.ARRIVED and current is not None:
+        return helm, False
+    lat, lon, depth = vehicle.lat_deg, vehicle.lon_deg, vehicle.depth_m
+    assert lat is not None and lon is not None and depth is not None
+    heading = vehicle.heading_deg if vehicle.heading_deg is not None else math.nan
+    if table is None:
+        new = Activity(situation=Situation.NO_TABLE, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
+        return _switch(helm, current, new, out, "no valid policy table: surfacing")
+    look = table.lookup(lat, lon, depth, heading)
+    if current is not None and current.completes and look.reason in ("ok", "unreachable"):
+        if not _complete(current, vehicle, table, look.state):
+            if current.timeout_s is None or now_s - current.started_s <= current.timeout_s:
+                return helm, False
+            out.events.append(Event("warning", f"{current.action.name if current.action else '?'} not complete after "
+                                               f"{now_s - current.started_s:.0f} s: deciding again"))
+    if look.reason == "at_goal":
+        new = _arrival(look.state, vehicle, table, config, now_s)
+        helm = replace(helm, phase=Phase.ARRIVED)
+        return _switch(helm, current, new, out, f"goal reached: {config.on_arrival}")
+    if look.reason == "outside_grid":
+        new = Activity(situation=Situation.OUTSIDE_GRID, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
+        return _switch(helm, current, new, out, f"outside the planned grid at {lat:.5f}, {lon:.5f}, {depth:.1f} m: surfacing")
+    if look.reason == "land":
+        new = Activity(situation=Situation.LAND, action=None, cell=look.state, mode=SubMode.SURFACE, target=None, started_s=now_s)
+        return _switch(helm, current, new, out, f"position in a land cell {look.state}: surfacing")
+    if look.reason == "unreachable":
+        new = Activity(situation=Situation.UNREACHABLE, action=None, cell=look.state, mode=SubMode.ALT_HOLD,
+                       target=DepthTarget(table.depth_m[look.state[0]]), started_s=now_s)  # type: ignore[index]
+        return _switch(helm, current, new, out, f"no action reaches the goal from {look.state}: drifting at depth")
+    assert look.state is not None
+    new = _action_activity(look.action, look.state, table, config, now_s)
+    return _switch(helm, current, new, out, None)
+
+
+def _switch(helm: HelmState, current: Activity | None, new: Activity, out: _Out, text: str | None) -> tuple[HelmState, bool]:
+    if current is not None and current.key == new.key:
+        return helm, False
+    if text is not None and (current is None or current.situation is not new.situation):
+        out.events.append(Event("info" if new.situation is Situation.AT_GOAL else "warning", text))
+    elif text is None and current is not None and current.situation is not Situation.FOLLOWING:
+        out.events.append(Event("info", f"back on the plan ({current.situation.value} cleared)"))
+    return replace(helm, activity=new, target_sent_s=None, mode_request_s=None), True
+
+
+def _action_activity(action: Action, state: tuple[int, int, int, int], table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:
+    l, j, _i, k = state
+    base = dict(situation=Situation.FOLLOWING, action=action, cell=state, started_s=now_s)
+    if action == Action.FORWARD:
+        yaw = table.bearing_deg(j, k)  # spec section 2: steer along bearing_k(j) of this cell
+        rad = math.radians(yaw)
+        speed = config.cruise_speed_m_s
+        target = VelocityYaw(speed * math.cos(rad), speed * math.sin(rad), 0.0, yaw)
+        return Activity(mode=SubMode.GUIDED, target=target, **base)  # type: ignore[arg-type]
+    if action in (Action.ROTATE_LEFT, Action.ROTATE_RIGHT):
+        goal_k = (k + 1) % 8 if action == Action.ROTATE_LEFT else (k - 1) % 8  # spec section 5
+        yaw = table.bearing_deg(j, goal_k)
+        timeout = 3.0 * 90.0 / config.yaw_rate_deg_s + 10.0
+        return Activity(mode=SubMode.GUIDED, target=VelocityYaw(0.0, 0.0, 0.0, yaw), completes=True, goal_k=goal_k,
+                        timeout_s=timeout, **base)  # type: ignore[arg-type]
+    if action in (Action.UP, Action.DOWN):
+        goal_l = l - 1 if action == Action.UP else l + 1
+        goal_depth = table.depth_m[goal_l]
+        timeout = 3.0 * abs(goal_depth - table.depth_m[l]) / config.glide_rate_m_s + 30.0
+        return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(goal_depth), completes=True, goal_depth_m=goal_depth,
+                        timeout_s=timeout, **base)  # type: ignore[arg-type]
+    # DRIFT: hold the layer's depth, no thrust.
+    return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(table.depth_m[l]), **base)  # type: ignore[arg-type]
+
+
+def _complete(act: Activity, vehicle: VehicleState, table: PolicyTable, state: tuple[int, int, int, int] | None) -> bool:
+    if act.goal_k is not None:
+        if state is None or vehicle.heading_deg is None:
+            return False
+        return table.heading_index(state[1], vehicle.heading_deg) == act.goal_k
+    if act.goal_depth_m is not None and vehicle.depth_m is not None:
+        return abs(vehicle.depth_m - act.goal_depth_m) <= 0.5
+    return True
+
+
+def _arrival(state: tuple[int, int, int, int] | None, vehicle: VehicleState, table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:
+    base = dict(situation=Situation.AT_GOAL, action=Action.AT_GOAL, cell=state, started_s=now_s)
+    if config.on_arrival == "surface":
+        return Activity(mode=SubMode.SURFACE, target=None, **base)  # type: ignore[arg-type]
+    if config.on_arrival == "drift":
+        return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(float(vehicle.depth_m or 0.0)), **base)  # type: ignore[arg-type]
+    # hold (and "next", until multi-goal missions land): keep station where the goal was reached.
+    hold = PositionTarget(float(vehicle.lat_deg), float(vehicle.lon_deg), table.goal_depth_m)  # type: ignore[arg-type]
+    return Activity(mode=SubMode.GUIDED, target=hold, **base)  # type: ignore[arg-type]
+
+
+def _realise(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:
+    """Get the vehicle into the activity's mode, armed, then stream its target."""
+    act = helm.activity
+    assert act is not None
+    if act.mode is not SubMode.SURFACE and not vehicle.armed and _due(helm.arm_request_s, now_s, config.retry_s):
+        out.commands.append(Arm(True))
+        helm = replace(helm, arm_request_s=now_s)
+    if vehicle.mode != act.mode:
+        if _due(helm.mode_request_s, now_s, config.retry_s):
+            out.commands.append(SetMode(act.mode))
+            helm = replace(helm, mode_request_s=now_s)
+        return helm
+    if act.target is not None and _due(helm.target_sent_s, now_s, config.refresh_s):
+        out.commands.append(act.target)
+        helm = replace(helm, target_sent_s=now_s)
+    return helm
