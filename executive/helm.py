@@ -261,6 +261,7 @@ def _choose(
                 return helm, False
             out.events.append(Event("warning", f"{current.action.name if current.action else '?'} not complete after "
                                                f"{now_s - current.started_s:.0f} s: deciding again"))
+            current = None  # start afresh, with a new timeout, even if the table gives the same action
     if look.reason == "at_goal":
         new = _arrival(look.state, vehicle, table, config, now_s)
         helm = replace(helm, phase=Phase.ARRIVED)

@@ -85,6 +85,8 @@ class PolicyTable:
         bearings = bearings_deg(dx_m, dy_m)
         bearings.setflags(write=False)
         object.__setattr__(self, "_bearings", bearings)
+        # Plain floats for the per-message lookup: numpy's per-call overhead dominates on 8 values.
+        object.__setattr__(self, "_bearing_rows", tuple(tuple(float(b) for b in row) for row in bearings))
 
     @classmethod
     def from_solution(
@@ -176,9 +178,13 @@ class PolicyTable:
 
     def heading_index(self, j: int, heading_deg: float) -> int:
         """Grid direction nearest to a compass heading in row ``j``; ties to the lower ``k`` (spec 2)."""
-        row = self._bearings[j]  # type: ignore[attr-defined]
-        diff = np.abs(np.mod(float(heading_deg) - row + 180.0, 360.0) - 180.0)
-        return int(np.argmin(diff))
+        h = float(heading_deg)
+        best_k, best = 0, math.inf
+        for k, b in enumerate(self._bearing_rows[j]):  # type: ignore[attr-defined]
+            diff = abs((h - b + 180.0) % 360.0 - 180.0)
+            if diff < best:  # strict: ties keep the lower k
+                best_k, best = k, diff
+        return best_k
 
     def lookup(self, lat_deg: float, lon_deg: float, depth_m: float, heading_deg: float) -> Lookup:
         """The action for a position and compass heading, in constant time."""

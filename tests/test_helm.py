@@ -224,3 +224,15 @@ def test_duplicated_telemetry_sends_nothing_twice(table):
     first = _run(table, vehicle)
     dup = _run(table, vehicle, helm=first.helm)
     assert first.commands and dup.commands == () and dup.events == ()
+
+
+def test_an_action_that_never_completes_times_out_once_and_restarts(table):
+    state = _state_with(table, Action.ROTATE_LEFT)
+    stuck = _vehicle_at(table, state)  # the heading never changes
+    tick = _run(table, stuck)
+    timeout = tick.helm.activity.timeout_s
+    late = _run(table, replace(stuck, time_s=100.0 + timeout + 1), helm=tick.helm, now_s=100.0 + timeout + 1)
+    assert [e.level for e in late.events] == ["warning"] and late.decision.changed
+    assert late.commands  # the turn is commanded again
+    after = _run(table, replace(stuck, time_s=100.0 + timeout + 2), helm=late.helm, now_s=100.0 + timeout + 2)
+    assert after.events == () and not after.decision.changed

@@ -133,3 +133,14 @@ def test_reader_needs_only_numpy():
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_heading_index_equals_the_vectorised_nearest_bearing(demo_plan, rng):
+    """The per-message loop in plain floats agrees with argmin over all eight bearings (spec section 2)."""
+    table = demo_plan.table
+    headings = np.concatenate([rng.uniform(-720, 720, 2000), np.arange(0, 360, 0.5)])
+    for j in (0, table.ny // 2, table.ny - 1):
+        row = np.array([table.bearing_deg(j, k) for k in range(8)])
+        for h in headings:
+            expected = int(np.argmin(np.abs(np.mod(h - row + 180.0, 360.0) - 180.0)))
+            assert table.heading_index(j, h) == expected, (j, h)

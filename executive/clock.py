@@ -1,0 +1,71 @@
+"""The vehicle's clock, as the executive sees it.
+
+All executive timing (heartbeat pacing, target refresh, timeouts, link loss)
+runs on the autopilot's ``time_boot_ms``, so the executive works unchanged at
+any simulator speedup (research/executive-anchors.md section 2.2: SITL's
+time_boot_ms scales with ``--speedup``). Between messages, and during a link
+silence, vehicle time is extrapolated from wall time at the rate observed so
+far, so the heartbeat keeps its 1 Hz in vehicle time and a silent link is
+noticed after the right number of vehicle seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+# Smoothing of the observed rate (vehicle seconds per wall second).
+_RATE_GAIN = 0.2
+# Rate estimates use spans of at least this much wall time (scheduling jitter dominates below).
+_MIN_SPAN_WALL_S = 0.02
+# time_boot_ms going back by more than this is a reboot of the autopilot, not reordering.
+_REBOOT_BACKSTEP_S = 5.0
+
+
+@dataclass(slots=True)
+class VehicleClock:
+    """Maps wall time to vehicle time; fed with every ``time_boot_ms`` seen."""
+
+    rate: float = 1.0  # vehicle seconds per wall second (the simulator's speedup)
+    max_rate: float = 1e5
+    _vehicle_s: float | None = None
+    _wall_s: float = 0.0
+    _anchor_vehicle_s: float | None = None
+    _anchor_wall_s: float = 0.0
+    reboots: int = 0
+
+    @property
+    def synced(self) -> bool:
+        return self._vehicle_s is not None
+
+    def observe(self, time_boot_s: float, wall_s: float) -> bool:
+        """Record a vehicle timestamp; returns True when it reveals an autopilot reboot."""
+        if self._vehicle_s is None:
+            self._vehicle_s, self._wall_s = time_boot_s, wall_s
+            self._anchor_vehicle_s, self._anchor_wall_s = time_boot_s, wall_s
+            return False
+        if time_boot_s < self._vehicle_s - _REBOOT_BACKSTEP_S:
+            self.reboots += 1
+            self._vehicle_s, self._wall_s = time_boot_s, wall_s
+            self._anchor_vehicle_s, self._anchor_wall_s = time_boot_s, wall_s
+            return True
+        if time_boot_s <= self._vehicle_s:
+            return False  # duplicate or reordered datagram: keep the newest time
+        self._vehicle_s, self._wall_s = time_boot_s, wall_s
+        assert self._anchor_vehicle_s is not None
+        span_wall = wall_s - self._anchor_wall_s
+        if span_wall >= _MIN_SPAN_WALL_S:
+            observed = (time_boot_s - self._anchor_vehicle_s) / span_wall
+            observed = min(max(observed, 0.0), self.max_rate)
+            self.rate += _RATE_GAIN * (observed - self.rate)
+            self._anchor_vehicle_s, self._anchor_wall_s = time_boot_s, wall_s
+        return False
+
+    def now_s(self, wall_s: float) -> float:
+        """Vehicle time now: the last timestamp plus the extrapolated time since it arrived."""
+        if self._vehicle_s is None:
+            return 0.0
+        return self._vehicle_s + max(0.0, wall_s - self._wall_s) * self.rate
+
+    def wall_until(self, vehicle_s: float, wall_s: float) -> float:
+        """Wall seconds until vehicle time reaches ``vehicle_s`` (0 when already past)."""
+        return max(0.0, (vehicle_s - self.now_s(wall_s)) / max(self.rate, 1e-9))

@@ -1,0 +1,170 @@
+"""The bridge between MAVLink and the executive's value objects: the only place with MAVLink units.
+
+Telemetry from the autopilot becomes ``VehicleState`` updates (degE7, mm, cdeg,
+cm/s converted here and nowhere else), and ``Command`` objects become MAVLink
+messages with ArduSub's conventions (research/executive-anchors.md sections
+2.1 to 2.3, research/ardusub-sitl-facts.md). This is the executive's only
+pymavlink import.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import replace
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")  # MAVLink 2 framing (pymavlink reads this at import)
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from executive.state import (  # noqa: E402
+    Arm,
+    Command,
+    DepthTarget,
+    Event,
+    PositionTarget,
+    SetMessageInterval,
+    SetMode,
+    VehicleState,
+    VelocityYaw,
+)
+
+# Our identity (section 2.1): the onboard computer beside the autopilot.
+EXECUTIVE_SYSTEM = 1
+EXECUTIVE_COMPONENT = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER  # 191
+AUTOPILOT_SYSTEM = 1
+AUTOPILOT_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1  # 1
+
+# POSITION_TARGET_TYPEMASK (section 2.3, verified masks); 1 = ignore.
+MASK_VELOCITY_YAW = 2503  # vx, vy, vz, yaw
+MASK_DEPTH_ONLY = 3579  # z only (ALT_HOLD depth target)
+MASK_POSITION_ONLY = 3576  # x, y, z
+
+# Messages that carry time_boot_ms and drive decisions.
+DECISION_MESSAGES = frozenset({"GLOBAL_POSITION_INT", "ATTITUDE"})
+_UNKNOWN_HDG = 65535
+_STATUSTEXT_LEN = 50
+_SEVERITY = {"debug": mavlink.MAV_SEVERITY_DEBUG, "info": mavlink.MAV_SEVERITY_INFO,
+             "warning": mavlink.MAV_SEVERITY_WARNING, "error": mavlink.MAV_SEVERITY_ERROR}
+
+
+def new_mav(sink: Any, *, system: int = EXECUTIVE_SYSTEM, component: int = EXECUTIVE_COMPONENT) -> mavlink.MAVLink:
+    """A MAVLink 2 encoder/parser writing frames to ``sink.write(bytes)``."""
+    mav = mavlink.MAVLink(sink, srcSystem=system, srcComponent=component)
+    mav.robust_parsing = True  # skip garbage instead of raising on every bad byte
+    return mav
+
+
+def from_autopilot(msg: Any, system: int = AUTOPILOT_SYSTEM) -> bool:
+    return msg.get_srcSystem() == system and msg.get_srcComponent() == AUTOPILOT_COMPONENT
+
+
+def time_boot_s(msg: Any) -> float | None:
+    """Vehicle time of a message, when it carries ``time_boot_ms``."""
+    ms = getattr(msg, "time_boot_ms", None)
+    return None if ms is None else ms / 1000.0
+
+
+def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
+    """The vehicle state after one message from the autopilot (unchanged for other messages)."""
+    kind = msg.get_type()
+    if kind == "GLOBAL_POSITION_INT":
+        heading = None if msg.hdg == _UNKNOWN_HDG else (msg.hdg / 100.0) % 360.0
+        return replace(
+            vehicle,
+            time_s=msg.time_boot_ms / 1000.0,
+            lat_deg=msg.lat / 1e7,
+            lon_deg=msg.lon / 1e7,
+            depth_m=max(0.0, -msg.relative_alt / 1000.0),  # relative_alt is negative below the surface
+            heading_deg=heading if heading is not None else vehicle.heading_deg,
+        )
+    if kind == "ATTITUDE":
+        return replace(vehicle, time_s=msg.time_boot_ms / 1000.0, heading_deg=math.degrees(msg.yaw) % 360.0)
+    if kind == "HEARTBEAT":
+        armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        return replace(vehicle, mode=int(msg.custom_mode), armed=armed, heartbeat_s=now_s)
+    if kind == "EKF_STATUS_REPORT":
+        return replace(vehicle, position_ok=bool(msg.flags & mavlink.EKF_POS_HORIZ_ABS))
+    if kind == "BATTERY_STATUS":
+        pct = None if msg.battery_remaining < 0 else float(msg.battery_remaining)
+        wh = None if msg.energy_consumed < 0 else msg.energy_consumed / 36.0  # hJ -> Wh
+        return replace(vehicle, battery_pct=pct if pct is not None else vehicle.battery_pct,
+                       energy_used_wh=wh if wh is not None else vehicle.energy_used_wh)
+    if kind == "SYS_STATUS" and msg.battery_remaining >= 0:
+        return replace(vehicle, battery_pct=float(msg.battery_remaining))
+    return vehicle
+
+
+def encode(mav: mavlink.MAVLink, cmd: Command, *, time_boot_ms: int, target_system: int = AUTOPILOT_SYSTEM,
+           target_component: int = AUTOPILOT_COMPONENT) -> Any:
+    """The MAVLink message for a helm command, addressed to the autopilot."""
+    ts, tc = target_system, target_component
+    if isinstance(cmd, VelocityYaw):
+        return mav.set_position_target_local_ned_encode(
+            time_boot_ms, ts, tc, mavlink.MAV_FRAME_LOCAL_NED, MASK_VELOCITY_YAW,
+            0.0, 0.0, 0.0, cmd.north_m_s, cmd.east_m_s, cmd.down_m_s, 0.0, 0.0, 0.0,
+            math.radians(_wrap180(cmd.yaw_deg)), 0.0)
+    if isinstance(cmd, DepthTarget):
+        return mav.set_position_target_global_int_encode(
+            time_boot_ms, ts, tc, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, MASK_DEPTH_ONLY,
+            0, 0, -cmd.depth_m, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if isinstance(cmd, PositionTarget):
+        return mav.set_position_target_global_int_encode(
+            time_boot_ms, ts, tc, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, MASK_POSITION_ONLY,
+            round(cmd.lat_deg * 1e7), round(cmd.lon_deg * 1e7), -cmd.depth_m,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if isinstance(cmd, SetMode):
+        return _command_long(mav, ts, tc, mavlink.MAV_CMD_DO_SET_MODE,
+                             mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, int(cmd.mode))
+    if isinstance(cmd, Arm):
+        return _command_long(mav, ts, tc, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1 if cmd.arm else 0)
+    if isinstance(cmd, SetMessageInterval):
+        msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{cmd.message}")
+        interval_us = -1 if cmd.interval_s <= 0 else round(cmd.interval_s * 1e6)
+        return _command_long(mav, ts, tc, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, interval_us)
+    raise TypeError(f"not a command: {cmd!r}")
+
+
+def _command_long(mav: mavlink.MAVLink, ts: int, tc: int, command: int, *params: float) -> Any:
+    p = list(params) + [0.0] * (7 - len(params))
+    return mav.command_long_encode(ts, tc, command, 0, *p)
+
+
+def _wrap180(deg: float) -> float:
+    return (deg + 180.0) % 360.0 - 180.0
+
+
+def heartbeat(mav: mavlink.MAVLink, *, healthy: bool) -> Any:
+    """Our 1 Hz heartbeat: ONBOARD_CONTROLLER, autopilot INVALID (section 2.1)."""
+    status = mavlink.MAV_STATE_ACTIVE if healthy else mavlink.MAV_STATE_CRITICAL
+    return mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, status)
+
+
+def statustext(mav: mavlink.MAVLink, event: Event) -> Any:
+    text = event.text if len(event.text) <= _STATUSTEXT_LEN else event.text[: _STATUSTEXT_LEN - 3] + "..."
+    return mav.statustext_encode(_SEVERITY[event.level], text.encode("ascii", "replace"))
+
+
+def describe(msg: Any) -> dict[str, Any]:
+    """A JSON-ready record of a message for the log's raw MAVLink channels."""
+    fields = {}
+    for name in msg.get_fieldnames():
+        value = getattr(msg, name)
+        if isinstance(value, bytes | bytearray):
+            value = value.decode("ascii", "replace").rstrip("\x00")
+        elif isinstance(value, list):
+            value = [v for v in value]
+        fields[name] = value
+    return {"msg_id": msg.get_msgId(), "name": msg.get_type(), "src_system": msg.get_srcSystem(),
+            "src_component": msg.get_srcComponent(), "fields": fields}
+
+
+def command_text(msg: Any) -> str:
+    """Short text of a COMMAND_ACK or STATUSTEXT from the autopilot, for the event log."""
+    if msg.get_type() == "COMMAND_ACK":
+        cmd = mavlink.enums["MAV_CMD"].get(msg.command)
+        res = mavlink.enums["MAV_RESULT"].get(msg.result)
+        return f"COMMAND_ACK {cmd.name if cmd else msg.command}: {res.name if res else msg.result}"
+    text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
+    return f"autopilot: {text.rstrip(chr(0))}"

@@ -1,0 +1,235 @@
+"""The executive over real UDP: each action becomes the right MAVLink message (issue 2, point 5).
+
+The test is the autopilot here: a pymavlink endpoint on 127.0.0.1 (ephemeral
+port) that speaks like ArduSub (HEARTBEAT with custom modes, GLOBAL_POSITION_INT
+with negative relative_alt) and checks every message the executive sends back,
+field by field, against research/executive-anchors.md section 2.3.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from executive.helm import HelmConfig  # noqa: E402
+from executive.loop import ExecConfig, Executive  # noqa: E402
+from executive.recorder import read_messages  # noqa: E402
+from executive.state import SubMode  # noqa: E402
+from planner.actions import Action  # noqa: E402
+
+MAV = mavutil.mavlink
+
+
+class Autopilot:
+    """A scripted ArduSub-like peer: sends what ArduSub sends, returns what it receives."""
+
+    def __init__(self) -> None:
+        self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=1, source_component=1)
+        self.port = self.conn.port.getsockname()[1]
+        self.time_ms = 50_000
+        self.mode = SubMode.MANUAL
+        self.armed = False
+
+    def heartbeat(self) -> None:
+        base = MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
+        self.conn.mav.heartbeat_send(MAV.MAV_TYPE_SUBMARINE, MAV.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(self.mode),
+                                     MAV.MAV_STATE_ACTIVE)
+
+    def position(self, lat: float, lon: float, depth: float, heading: float, dt_ms: int = 200) -> None:
+        self.time_ms += dt_ms
+        self.conn.mav.global_position_int_send(self.time_ms, round(lat * 1e7), round(lon * 1e7), round(-depth * 1000),
+                                               round(-depth * 1000), 0, 0, 0, round(heading * 100) % 36000)
+
+    def expect(self, kind: str, *, timeout_s: float = 5.0, where=lambda m: True):  # type: ignore[no-untyped-def]
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            msg = self.conn.recv_match(blocking=True, timeout=0.1)
+            if msg is None:
+                continue
+            assert (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 191)
+            self._obey(msg)
+            if msg.get_type() == kind and where(msg):
+                return msg
+        raise AssertionError(f"no {kind} from the executive within {timeout_s} s")
+
+    def _obey(self, msg) -> None:  # type: ignore[no-untyped-def]
+        """Mode and arming requests take effect, as on ArduSub (acknowledged, then in the next HEARTBEAT)."""
+        if msg.get_type() == "COMMAND_LONG":
+            if msg.command == MAV.MAV_CMD_DO_SET_MODE:
+                self.mode = SubMode(int(msg.param2))
+            elif msg.command == MAV.MAV_CMD_COMPONENT_ARM_DISARM:
+                self.armed = msg.param1 == 1
+            self.conn.mav.command_ack_send(msg.command, MAV.MAV_RESULT_ACCEPTED)
+            self.heartbeat()
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+class Rig:
+    """The executive in a thread, connected to a scripted autopilot."""
+
+    def __init__(self, table, log_path: Path) -> None:  # type: ignore[no-untyped-def]
+        self.ap = Autopilot()
+        self.table = table
+        self.log_path = log_path
+        config = ExecConfig(link=f"udpout:127.0.0.1:{self.ap.port}", log_path=log_path,
+                            helm=HelmConfig(cruise_speed_m_s=1.0, on_arrival="hold"))
+        self.executive = Executive(config, table)
+        self._stop = threading.Event()
+        self.summary = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        self.summary = self.executive.run(self._stop)
+
+    def stop(self):  # type: ignore[no-untyped-def]
+        self._stop.set()
+        self.thread.join(timeout=10)
+        assert not self.thread.is_alive()
+        return self.summary
+
+
+@pytest.fixture()
+def rig(demo_plan, tmp_path: Path):
+    rig = Rig(demo_plan.table, tmp_path / "exec.mcap")
+    try:
+        rig.ap.expect("HEARTBEAT")  # the executive speaks first (udpout), so the autopilot learns its address
+        yield rig
+    finally:
+        rig.stop()
+        rig.ap.close()
+
+
+def _state(table, action: Action) -> tuple[int, int, int, int]:
+    states = np.argwhere(table.actions == int(action))
+    return tuple(int(x) for x in states[len(states) // 2])  # type: ignore[return-value]
+
+
+def _go(ap: Autopilot, table, state, *, heading=None) -> None:  # type: ignore[no-untyped-def]
+    l, j, i, k = state
+    lat, lon = table.cell_centre(j, i)
+    ap.heartbeat()
+    ap.position(lat, lon, table.depth_m[l], table.bearing_deg(j, k) if heading is None else heading)
+
+
+def _yaw_deg(msg) -> float:  # type: ignore[no-untyped-def]
+    return math.degrees(msg.yaw) % 360.0
+
+
+def test_setup_then_each_action_becomes_the_documented_message(rig):
+    ap, table = rig.ap, rig.table
+    fwd = _state(table, Action.FORWARD)
+    _go(ap, table, fwd)
+    # Set-up: message rates (SET_MESSAGE_INTERVAL to 1/1), then GUIDED and arming.
+    rate = ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_SET_MESSAGE_INTERVAL)
+    assert (rate.target_system, rate.target_component) == (1, 1)
+    assert rate.param1 == MAV.MAVLINK_MSG_ID_GLOBAL_POSITION_INT and rate.param2 == 500_000
+    ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.GUIDED)
+    ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_COMPONENT_ARM_DISARM and m.param1 == 1)
+
+    # FORWARD: LOCAL_NED velocity + yaw, mask 2503, along the cell's bearing at cruise speed.
+    _go(ap, table, fwd)
+    msg = ap.expect("SET_POSITION_TARGET_LOCAL_NED")
+    bearing = table.bearing_deg(fwd[1], fwd[3])
+    assert msg.type_mask == 2503 and msg.coordinate_frame == MAV.MAV_FRAME_LOCAL_NED
+    assert (msg.target_system, msg.target_component) == (1, 1)
+    assert math.hypot(msg.vx, msg.vy) == pytest.approx(1.0, rel=1e-6) and msg.vz == 0.0
+    assert math.degrees(math.atan2(msg.vy, msg.vx)) % 360 == pytest.approx(bearing % 360, abs=1e-3)
+    assert _yaw_deg(msg) == pytest.approx(bearing % 360, abs=1e-3)
+    # Re-sent while the action lasts (ArduSub drops velocity targets after 3 s).
+    for _ in range(6):
+        _go(ap, table, fwd)
+    again = ap.expect("SET_POSITION_TARGET_LOCAL_NED")
+    assert again.vx == pytest.approx(msg.vx) and again.time_boot_ms > msg.time_boot_ms
+
+    # DRIFT: ALT_HOLD, then a depth-only GLOBAL_INT target (mask 3579) at the layer's depth.
+    drift = _state(table, Action.DRIFT)
+    _go(ap, table, drift)
+    ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.ALT_HOLD)
+    _go(ap, table, drift)
+    depth = ap.expect("SET_POSITION_TARGET_GLOBAL_INT")
+    assert depth.type_mask == 3579 and depth.alt == pytest.approx(-table.depth_m[drift[0]])
+    assert depth.coordinate_frame == MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+
+    # DOWN: the neighbouring layer's depth, still in ALT_HOLD.
+    down = _state(table, Action.DOWN)
+    _go(ap, table, down)
+    glide = ap.expect("SET_POSITION_TARGET_GLOBAL_INT", where=lambda m: m.alt != depth.alt or down[0] != drift[0])
+    assert glide.type_mask == 3579 and glide.alt == pytest.approx(-table.depth_m[down[0] + 1])
+
+    # ROTATE_LEFT: GUIDED, zero velocity, yaw to the next direction counter-clockwise (45 deg left).
+    rot = _state(table, Action.ROTATE_LEFT)
+    _go(ap, table, rot)
+    ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.GUIDED)
+    _go(ap, table, rot)
+    turn = ap.expect("SET_POSITION_TARGET_LOCAL_NED")
+    assert turn.type_mask == 2503 and (turn.vx, turn.vy, turn.vz) == (0.0, 0.0, 0.0)
+    assert _yaw_deg(turn) == pytest.approx(table.bearing_deg(rot[1], (rot[3] + 1) % 8) % 360, abs=1e-3)
+
+    # Outside the grid: SURFACE (DO_SET_MODE 9), logged.
+    ap.heartbeat()
+    ap.position(table.lat0_deg - 0.5, table.lon0_deg, 5.0, 0.0)
+    text = ap.expect("STATUSTEXT")  # the event is logged and sent before the command
+    assert "outside the planned grid" in text.text and text.severity == MAV.MAV_SEVERITY_WARNING
+    ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.SURFACE)
+
+    # Goal: hold station with a position-only GLOBAL_INT target (mask 3576) at the goal depth.
+    goal = _state(table, Action.AT_GOAL)
+    _go(ap, table, goal)
+    ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.GUIDED)
+    _go(ap, table, goal)
+    hold = ap.expect("SET_POSITION_TARGET_GLOBAL_INT", where=lambda m: m.type_mask == 3576)
+    lat, lon = table.cell_centre(goal[1], goal[2])
+    assert hold.lat_int == round(lat * 1e7) and hold.lon_int == round(lon * 1e7)
+    assert hold.alt == pytest.approx(-table.goal_depth_m)
+
+
+def test_heartbeat_is_1hz_in_vehicle_time_and_identifies_a_companion(rig):
+    ap, table = rig.ap, rig.table
+    hb = ap.expect("HEARTBEAT")
+    assert hb.type == MAV.MAV_TYPE_ONBOARD_CONTROLLER and hb.autopilot == MAV.MAV_AUTOPILOT_INVALID
+    # Vehicle time running 50x faster than wall time: heartbeats come about 50 times a second.
+    state = _state(table, Action.FORWARD)
+    lat, lon = table.cell_centre(state[1], state[2])
+    t_end = time.monotonic() + 1.0
+    while time.monotonic() < t_end:
+        ap.position(lat, lon, 0.0, 0.0, dt_ms=1000)  # 1 s of vehicle time ...
+        time.sleep(0.02)  # ... every 20 ms of wall time
+    seen = 0
+    t_end = time.monotonic() + 0.5
+    while time.monotonic() < t_end:
+        msg = ap.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.05)
+        seen += msg is not None
+    assert seen >= 8  # wall-paced 1 Hz would give at most 1 in 0.5 s
+
+
+def test_the_log_has_every_run_element(rig):
+    ap, table = rig.ap, rig.table
+    fwd = _state(table, Action.FORWARD)
+    for _ in range(3):
+        _go(ap, table, fwd)
+    ap.expect("SET_POSITION_TARGET_LOCAL_NED")
+    for _ in range(3):
+        _go(ap, table, fwd)
+    summary = rig.stop()
+    assert summary.decisions >= 3
+    log_path = rig.log_path
+    topics = {t for t, _, _ in read_messages(log_path)}
+    assert {"/vehicle/fix", "/vehicle/state", "/executive/decision", "/executive/command", "/executive/policy",
+            "/mavlink/rx", "/mavlink/tx", "/log"} <= topics
+    policy = next(p for t, _, p in read_messages(log_path, ["/executive/policy"]))
+    assert policy["table_crc32"] == f"{table.crc32:08x}"
+    assert policy["forecast"]["identity"] == table.forecast_identity
+    decisions = [p for _, _, p in read_messages(log_path, ["/executive/decision"])]
+    assert decisions and decisions[-1]["action"] == "FORWARD" and decisions[-1]["cell"] == list(fwd)
