@@ -19,6 +19,7 @@ from typing import Any
 from executive import mavlink_bridge as bridge
 from executive.clock import VehicleClock
 from executive.helm import Decision, HelmConfig, HelmState, step
+from executive.latency import LatencyHistogram
 from executive.recorder import Recorder, Topic
 from executive.state import Command, Event, Phase, VehicleState
 from planner.table import PolicyTable
@@ -57,6 +58,9 @@ class RunSummary:
     final_phase: str
     reason: str  # why the loop stopped
     log_path: str
+    decision_median_us: float | None = None  # datagram read -> commands sent
+    decision_p99_us: float | None = None
+    message_p99_us: float | None = None  # including the MCAP writes
 
 
 class Executive:
@@ -81,6 +85,10 @@ class Executive:
         self._arrival_s: float | None = None
         self._counts = {"decisions": 0, "in": 0, "bad": 0, "out": 0, "stale": 0}
         self._stop_reason: str | None = None
+        # Log writes wait until the message's commands are out: logging never delays control.
+        self._later: list[tuple[Any, tuple[Any, ...], dict[str, Any]]] = []
+        self.decision_latency = LatencyHistogram()  # datagram read -> commands sent
+        self.message_cost = LatencyHistogram()  # datagram read -> everything logged
         if table is not None:
             self._record_policy(table, table_bytes, "loaded")
         else:
@@ -110,6 +118,7 @@ class Executive:
         return summary
 
     def close(self) -> None:
+        self._write_later()
         self.recorder.close()
         self.conn.close()
 
@@ -120,6 +129,7 @@ class Executive:
             data = self.conn.recv()
             if not data:
                 return
+            t0 = time.perf_counter()
             try:
                 msgs = self.mav.parse_buffer(bytes(data) if not isinstance(data, bytes) else data) or []
             except Exception:  # pymavlink raises on some malformed frames even when robust
@@ -127,13 +137,27 @@ class Executive:
                 continue
             wall = time.monotonic()
             for msg in msgs:
-                self._on_message(msg, wall)
+                decided = self._on_message(msg, wall)
+                if decided:
+                    self.decision_latency.add(time.perf_counter() - t0)
+                self._write_later()
+                if decided:
+                    self.message_cost.add(time.perf_counter() - t0)
 
-    def _on_message(self, msg: Any, wall: float) -> None:
+    def _log(self, fn: Any, *args: Any, **kwargs: Any) -> None:
+        self._later.append((fn, args, kwargs))
+
+    def _write_later(self) -> None:
+        for fn, args, kwargs in self._later:
+            fn(*args, **kwargs)
+        self._later.clear()
+
+    def _on_message(self, msg: Any, wall: float) -> bool:
+        """Handle one message; True when it ran a decision."""
         kind = msg.get_type()
         if kind == "BAD_DATA":
             self._counts["bad"] += 1
-            return
+            return False
         self._counts["in"] += 1
         t_boot = bridge.time_boot_s(msg)
         mine = bridge.from_autopilot(msg, self.config.autopilot_system)
@@ -143,13 +167,13 @@ class Executive:
             self.helm = HelmState()
             self._last_time.clear()
         now_s = self.clock.now_s(wall)
-        self.recorder.write(Topic.MAVLINK_RX, now_s, bridge.describe(msg))
+        self._log(self._record_rx, now_s, msg)
         if not mine:
-            return
+            return False
         if t_boot is not None:
             if t_boot < self._last_time.get(kind, -1.0):
                 self._counts["stale"] += 1  # reordered or duplicated datagram: never step back in time
-                return
+                return False
             self._last_time[kind] = t_boot
         self.vehicle = bridge.apply(self.vehicle, msg, now_s)
         if kind in ("COMMAND_ACK", "STATUSTEXT"):
@@ -158,9 +182,14 @@ class Executive:
                 level = "info"
             self._event(now_s, Event(level, bridge.command_text(msg)))  # type: ignore[arg-type]
         if kind == "GLOBAL_POSITION_INT":
-            self._record_state(now_s)
+            self._log(self._record_state, now_s, self.vehicle)
         if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase is not Phase.RUNNING):
             self._tick(now_s if t_boot is None else t_boot, link_ok=True)
+            return kind in bridge.DECISION_MESSAGES
+        return False
+
+    def _record_rx(self, now_s: float, msg: Any) -> None:
+        self.recorder.write(Topic.MAVLINK_RX, now_s, bridge.describe(msg))
 
     # -- decisions and output ---------------------------------------------------------------
 
@@ -173,7 +202,7 @@ class Executive:
             self._send_command(now_s, cmd)
         if tick.decision is not None:
             self._counts["decisions"] += 1
-            self.recorder.write(Topic.DECISION, now_s, _decision_payload(tick.decision))
+            self._log(self.recorder.write, Topic.DECISION, now_s, _decision_payload(tick.decision))
         if self.helm.phase is Phase.ARRIVED and self._arrival_s is None:
             self._arrival_s = now_s
 
@@ -182,20 +211,22 @@ class Executive:
                             target_system=self.config.autopilot_system)
         self._send(now_s, msg)
         fields = {name: getattr(cmd, name) for name in cmd.__slots__}  # type: ignore[union-attr]
-        self.recorder.write(Topic.COMMAND, now_s, {"time_s": now_s, "kind": type(cmd).__name__, **fields})
+        self._log(self.recorder.write, Topic.COMMAND, now_s, {"time_s": now_s, "kind": type(cmd).__name__, **fields})
 
     def _send(self, now_s: float, msg: Any) -> None:
         self.mav.send(msg)
         self._counts["out"] += 1
+        self._log(self._record_tx, now_s, msg)
+
+    def _record_tx(self, now_s: float, msg: Any) -> None:
         self.recorder.write(Topic.MAVLINK_TX, now_s, bridge.describe(msg))
 
     def _event(self, now_s: float, event: Event) -> None:
-        self.recorder.log(now_s, event.level, event.text)
+        self._log(self.recorder.log, now_s, event.level, event.text)
         if event.level in ("warning", "error"):
             self._send(now_s, bridge.statustext(self.mav, event))
 
-    def _record_state(self, now_s: float) -> None:
-        v = self.vehicle
+    def _record_state(self, now_s: float, v: VehicleState) -> None:
         if v.has_position:
             self.recorder.location_fix(now_s, lat_deg=v.lat_deg, lon_deg=v.lon_deg, depth_m=v.depth_m)  # type: ignore[arg-type]
         self.recorder.write(Topic.STATE, now_s, {name: getattr(v, name) for name in _STATE_FIELDS})
@@ -231,6 +262,7 @@ class Executive:
         hb = self.vehicle.heartbeat_s
         if hb is not None and now_s - hb > self.config.helm.link_loss_timeout_s:
             self._tick(now_s, link_ok=False)
+        self._write_later()
         self.recorder.maybe_flush()
         cfg = self.config
         if cfg.exit_on_arrival and self._arrival_s is not None and now_s - self._arrival_s >= cfg.linger_s:
@@ -249,6 +281,9 @@ class Executive:
             decisions=self._counts["decisions"], messages_in=self._counts["in"], messages_bad=self._counts["bad"],
             commands_out=self._counts["out"], final_phase=self.helm.phase.value,
             reason=self._stop_reason or "stopped", log_path=str(self.config.log_path),
+            decision_median_us=self.decision_latency.percentile_us(50),
+            decision_p99_us=self.decision_latency.percentile_us(99),
+            message_p99_us=self.message_cost.percentile_us(99),
         )
 
 
