@@ -1,0 +1,477 @@
+"""The simulated vehicle on the network: MAVLink 2 over UDP, paced like ArduPilot SITL's ``--speedup``.
+
+The only module of the simulator that imports pymavlink. A ``Simulator`` binds one UDP
+socket, learns its peers from the datagrams it receives and sends everything to every peer
+heard in the last ``peer_timeout_s`` wall seconds (as ArduPilot routes). It speaks as
+system 1, component 1, a SUBMARINE with ArduPilot custom modes, and streams telemetry at
+ArduSub's default rates (research/ardusub-sitl-facts.md), changeable with
+MAV_CMD_SET_MESSAGE_INTERVAL. Every time field (``time_boot_ms``) is *simulated* time.
+
+The main loop steps the physics every ``dt_s`` of simulated time (telemetry can therefore
+stream at most at 1 / dt_s = 10 Hz by default), polls the socket without blocking, sends
+what is due, and sleeps so that simulated time runs at ``speedup`` x wall time; when it
+cannot keep up it runs flat out. Behaviour lives in ``autopilot``, physics in ``dynamics``,
+currents in ``world``; this module only moves bytes and clocks.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+import select
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+os.environ["MAVLINK20"] = "1"  # MAVLink 2 framing (pymavlink reads this at import)
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from vehicle_sim.autopilot import (  # noqa: E402
+    DEFAULT_INTERVALS_S,
+    Ack,
+    Autopilot,
+    AutopilotSettings,
+    Interval,
+    Msg,
+    SendOnce,
+    SubMode,
+    Text,
+    clip_text,
+)
+from vehicle_sim.dynamics import Body, Reading, VehicleParams, battery_remaining, observe, power_w, step  # noqa: E402
+from vehicle_sim.world import World  # noqa: E402
+
+SYSTEM_ID = 1
+COMPONENT_ID = mavlink.MAV_COMP_ID_AUTOPILOT1  # 1
+TRACK_COLUMNS = ("time_s", "lat_deg", "lon_deg", "depth_m", "heading_deg", "mode", "armed", "energy_used_wh")
+
+# SYS_STATUS sensor bits: IMU, compass, pressure (depth), AHRS, battery, pre-arm.
+_SENSORS = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+            | mavlink.MAV_SYS_STATUS_AHRS | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY | mavlink.MAV_SYS_STATUS_PREARM_CHECK)
+# EKF_STATUS_REPORT flags before and after the EKF has an absolute position (SITL: ~41 s after boot).
+_EKF_NO_POSITION = (mavlink.EKF_ATTITUDE | mavlink.EKF_VELOCITY_VERT | mavlink.EKF_POS_VERT_ABS
+                    | mavlink.EKF_CONST_POS_MODE)
+_EKF_POSITION = (mavlink.EKF_ATTITUDE | mavlink.EKF_VELOCITY_HORIZ | mavlink.EKF_VELOCITY_VERT
+                 | mavlink.EKF_POS_HORIZ_REL | mavlink.EKF_POS_HORIZ_ABS | mavlink.EKF_POS_VERT_ABS
+                 | mavlink.EKF_PRED_POS_HORIZ_REL | mavlink.EKF_PRED_POS_HORIZ_ABS)
+_CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+                 | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT)
+_NEEDS_READING = frozenset({Msg.GLOBAL_POSITION_INT, Msg.ATTITUDE, Msg.VFR_HUD})
+_MAX_LAG_WALL_S = 0.25  # behind by more than this: stop trying to catch up (run flat out from here)
+_MIN_SLEEP_S = 0.0005
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimConfig:
+    """Everything a run needs besides the world; the CLI builds one from its flags."""
+
+    start_lat_deg: float
+    start_lon_deg: float
+    start_depth_m: float = 0.0
+    start_heading_deg: float = 0.0
+    start_offset_s: float = 0.0  # world (forecast) time at boot, seconds after the forecast's first time
+    speedup: float = 1.0  # simulated seconds per wall second (SITL --speedup)
+    host: str = "127.0.0.1"
+    port: int = 14560  # 0: ephemeral
+    seed: int = 0  # sensor noise
+    dt_s: float = 0.1  # physics step (simulated)
+    params: VehicleParams = field(default_factory=VehicleParams)
+    autopilot: AutopilotSettings = field(default_factory=AutopilotSettings)
+    track_path: Path | None = None
+    track_interval_s: float = 1.0
+    peer_timeout_s: float = 10.0  # wall seconds without a datagram before a peer stops getting output
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.speedup) and self.speedup > 0):
+            raise ValueError(f"SimConfig.speedup: expected a number > 0; got {self.speedup!r}")
+        if not (0.001 <= self.dt_s <= 1.0):
+            raise ValueError(f"SimConfig.dt_s: expected 0.001..1 s; got {self.dt_s!r}")
+
+
+@dataclass
+class SimStats:
+    """Counters of a run (not part of any protocol)."""
+
+    datagrams_in: int = 0
+    messages_in: int = 0
+    parse_errors: int = 0  # undecodable bytes or frames (bad prefix, CRC, length)
+    ignored: int = 0  # addressed to another system/component
+    messages_out: int = 0
+    send_errors: int = 0
+    lag_resets: int = 0  # times the loop fell more than 0.25 s (wall) behind the asked speedup
+
+
+class _Fanout:
+    """The file pymavlink writes frames to: one datagram per frame to every live peer."""
+
+    def __init__(self, sock: socket.socket, stats: SimStats) -> None:
+        self.sock = sock
+        self.stats = stats
+        self.targets: list[tuple[str, int]] = []
+
+    def write(self, buf: bytes) -> None:
+        for addr in self.targets:
+            try:
+                self.sock.sendto(buf, addr)
+            except OSError:  # buffer full, peer gone (ICMP): UDP may drop
+                self.stats.send_errors += 1
+
+
+class _Stream:
+    """One periodic message: interval and next due time in simulated milliseconds."""
+
+    __slots__ = ("due_ms", "interval_ms", "msg_id")
+
+    def __init__(self, msg_id: int, interval_ms: int | None) -> None:
+        self.msg_id = msg_id
+        self.interval_ms = interval_ms
+        self.due_ms = 0
+
+
+class Simulator:
+    """A simulated ArduSub-like LRAUV behind a UDP socket. Use as a context manager or call ``close``."""
+
+    def __init__(self, world: World, config: SimConfig) -> None:
+        self.world = world
+        self.config = config
+        self.params = config.params
+        self.stats = SimStats()
+        self.autopilot = Autopilot(config.autopilot, battery_wh=config.params.battery_wh,
+                                   origin_lat_deg=config.start_lat_deg, origin_lon_deg=config.start_lon_deg)
+        self._body = Body(0.0, config.start_lat_deg, config.start_lon_deg, config.start_depth_m,
+                          config.start_heading_deg % 360.0)
+        self._t_ms = 0
+        self._dt_ms = max(1, round(config.dt_s * 1000))
+        self._dt_s = self._dt_ms / 1000.0
+        self._rng = random.Random(config.seed)
+        self._streams = [_Stream(int(k), round(v * 1000)) for k, v in DEFAULT_INTERVALS_S.items()]
+
+        self._track: TextIO | None = None
+        self._track_every_ms = max(self._dt_ms, round(config.track_interval_s * 1000))
+        self._track_due_ms = 0
+        self._track_last_ms = -1
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._sock.bind((config.host, config.port))
+            if config.track_path is not None:
+                self._track = open(config.track_path, "w", buffering=1 << 16)  # noqa: SIM115 (closed in close())
+                self._track.write(",".join(TRACK_COLUMNS) + "\n")
+                self._write_track()  # the state at boot
+                self._track_due_ms = self._track_every_ms
+        except OSError:
+            self._sock.close()
+            raise
+        self._sock.setblocking(False)
+        self.host, self.port = self._sock.getsockname()[:2]
+        self._fanout = _Fanout(self._sock, self.stats)
+        self._peers: dict[tuple[str, int], float] = {}  # address -> wall time last heard
+        self._wall = time.monotonic()
+        self._next_prune_wall = self._wall + 1.0
+        self._mav = mavlink.MAVLink(self._fanout, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._handlers = {
+            Msg.HEARTBEAT: self._on_heartbeat,
+            Msg.SET_MODE: self._on_set_mode,
+            mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._on_command_long,
+            mavlink.MAVLINK_MSG_ID_COMMAND_INT: self._on_command_int,
+            mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_local_ned,
+            mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT: self._on_global_int,
+        }
+        self._closed = False
+
+    # -- what tests and the CLI read ---------------------------------------------------------
+
+    @property
+    def body(self) -> Body:
+        """The true state (no noise)."""
+        return self._body
+
+    @property
+    def time_s(self) -> float:
+        """Simulated seconds since boot (``time_boot_ms`` / 1000)."""
+        return self._t_ms / 1000.0
+
+    @property
+    def mode(self) -> SubMode:
+        return self.autopilot.mode
+
+    @property
+    def armed(self) -> bool:
+        return self.autopilot.armed
+
+    @property
+    def energy_used_wh(self) -> float:
+        return self._body.energy_used_wh
+
+    @property
+    def peers(self) -> list[tuple[str, int]]:
+        return list(self._fanout.targets)
+
+    # -- running ---------------------------------------------------------------------------------
+
+    def run(self, duration_s: float | None = None, stop_event: threading.Event | None = None) -> None:
+        """Step until ``duration_s`` more simulated seconds have passed or ``stop_event`` is set."""
+        end_ms = None if duration_s is None else self._t_ms + round(duration_s * 1000)
+        rate_ms = self.config.speedup * 1000.0  # simulated ms per wall second
+        max_lag_ms = _MAX_LAG_WALL_S * rate_ms
+        wall0 = time.monotonic()
+        sim0 = self._t_ms
+        sock = self._sock
+        while end_ms is None or self._t_ms < end_ms:
+            if stop_event is not None and stop_event.is_set():
+                break
+            wall = time.monotonic()
+            ahead_ms = self._t_ms - sim0 - (wall - wall0) * rate_ms
+            if ahead_ms > 0.0:
+                wait = ahead_ms / rate_ms
+                if wait >= _MIN_SLEEP_S:
+                    readable, _, _ = select.select([sock], [], [], min(wait, 0.05))
+                    if readable:
+                        self._wall = time.monotonic()
+                        self._poll()
+                    continue
+            elif ahead_ms < -max_lag_ms:  # cannot keep up: do not try to catch up later in a burst
+                wall0, sim0 = wall, self._t_ms
+                self.stats.lag_resets += 1
+            self.step_once(wall)
+
+    def step_once(self, wall: float | None = None) -> None:
+        """Receive what is waiting, step the physics by ``dt_s`` and send what is due."""
+        self._wall = time.monotonic() if wall is None else wall
+        if self._wall >= self._next_prune_wall:
+            self._prune_peers()
+        self._poll()
+        ap = self.autopilot
+        body = self._body
+        now_s = self._t_ms / 1000.0
+        events = ap.tick(now_s, body)
+        if events:
+            self._do(events)
+        current = self.world.current_at(self.config.start_offset_s + now_s, body.lat_deg, body.lon_deg, body.depth_m)
+        self._body = step(body, ap.setpoint, current, self.params, self._dt_s)
+        self._t_ms += self._dt_ms
+        self._send_due()
+        if self._track is not None and self._t_ms >= self._track_due_ms:
+            self._track_due_ms = self._t_ms + self._track_every_ms
+            self._write_track()
+
+    def close(self) -> None:
+        """Close the socket and flush the track file; safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._sock.close()
+        if self._track is not None:
+            self._write_track()
+            self._track.close()
+
+    def __enter__(self) -> Simulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- receiving ---------------------------------------------------------------------------------
+
+    def _poll(self) -> None:
+        sock = self._sock
+        while True:
+            try:
+                data, addr = sock.recvfrom(65536)
+            except BlockingIOError:
+                return
+            except OSError:  # e.g. ICMP port unreachable from a peer that went away
+                self.stats.send_errors += 1
+                continue
+            self.stats.datagrams_in += 1
+            if addr not in self._peers:
+                self._fanout.targets.append(addr)
+            self._peers[addr] = self._wall
+            self._receive(data)
+
+    def _receive(self, data: bytes) -> None:
+        parser = self._parser
+        try:
+            msgs = parser.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - nothing a peer sends may stop the vehicle
+            self.stats.parse_errors += 1
+            msgs = []
+        # A datagram holds whole frames: never let a broken one swallow the next datagram.
+        parser.buf = bytearray()
+        parser.buf_index = 0
+        parser.expected_length = mavlink.HEADER_LEN_V1 + 2
+        for msg in msgs:
+            msg_id = msg.get_msgId()
+            if msg_id < 0:  # MAVLink_bad_data
+                self.stats.parse_errors += 1
+                continue
+            self.stats.messages_in += 1
+            handler = self._handlers.get(msg_id)
+            if handler is None:
+                continue
+            ts = getattr(msg, "target_system", 0)
+            tc = getattr(msg, "target_component", 0)
+            if ts not in (0, SYSTEM_ID) or tc not in (0, COMPONENT_ID):
+                self.stats.ignored += 1
+                continue
+            try:
+                handler(msg)
+            except Exception:  # noqa: BLE001 - a malformed field (NaN, out of range) must not crash the vehicle
+                self.stats.parse_errors += 1
+
+    def _source(self, msg: Any) -> tuple[int, int]:
+        return msg.get_srcSystem(), msg.get_srcComponent()
+
+    def _on_heartbeat(self, msg: Any) -> None:
+        self._do(self.autopilot.heartbeat(self.time_s, msg.get_srcSystem(), msg.get_srcComponent()))
+
+    def _on_set_mode(self, msg: Any) -> None:
+        self._do(self.autopilot.set_mode_message(self.time_s, self._body, msg.base_mode, msg.custom_mode,
+                                                 self._source(msg)))
+
+    def _on_command_long(self, msg: Any) -> None:
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
+        self._do(self.autopilot.command(self.time_s, self._body, msg.command, params, self._source(msg)))
+
+    def _on_command_int(self, msg: Any) -> None:
+        params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
+        self._do(self.autopilot.command(self.time_s, self._body, msg.command, params, self._source(msg)))
+
+    def _on_local_ned(self, msg: Any) -> None:
+        self.autopilot.position_target_local(
+            self.time_s, self._body, frame=msg.coordinate_frame, type_mask=msg.type_mask, x=msg.x, y=msg.y, z=msg.z,
+            vx=msg.vx, vy=msg.vy, vz=msg.vz, yaw_rad=msg.yaw, yaw_rate_rad_s=msg.yaw_rate)
+
+    def _on_global_int(self, msg: Any) -> None:
+        self.autopilot.position_target_global(
+            self.time_s, self._body, frame=msg.coordinate_frame, type_mask=msg.type_mask, lat_int=msg.lat_int,
+            lon_int=msg.lon_int, alt_m=msg.alt, vx=msg.vx, vy=msg.vy, vz=msg.vz)
+
+    def _do(self, outputs: list[Any]) -> None:
+        """Carry out what the autopilot returned."""
+        mav = self._mav
+        for out in outputs:
+            if isinstance(out, Ack):
+                mav.command_ack_send(out.command, int(out.result), 0, 0, out.target_system, out.target_component)
+                self.stats.messages_out += 1
+            elif isinstance(out, Text):
+                mav.statustext_send(int(out.severity), clip_text(out.text).encode("ascii", "replace"))
+                self.stats.messages_out += 1
+            elif isinstance(out, Interval):
+                for s in self._streams:
+                    if s.msg_id == out.message_id:
+                        s.interval_ms = None if out.interval_s is None else max(1, round(out.interval_s * 1000))
+                        s.due_ms = self._t_ms
+            elif isinstance(out, SendOnce) and self._fanout.targets:
+                self._send(out.message_id, self._observe())
+
+    def _prune_peers(self) -> None:
+        limit = self._wall - self.config.peer_timeout_s
+        for addr, heard in list(self._peers.items()):
+            if heard < limit:
+                del self._peers[addr]
+        self._fanout.targets = list(self._peers)
+        self._next_prune_wall = self._wall + 1.0
+
+    # -- sending -------------------------------------------------------------------------------------
+
+    def _send_due(self) -> None:
+        """Send the streams that are due. Noise is drawn even with no peer, so runs repeat from a seed."""
+        now = self._t_ms
+        live = bool(self._fanout.targets)
+        reading = None
+        for s in self._streams:
+            interval = s.interval_ms
+            if interval is None or now < s.due_ms:
+                continue
+            s.due_ms += interval
+            if s.due_ms <= now:
+                s.due_ms = now + interval
+            if s.msg_id in _NEEDS_READING and reading is None:
+                reading = observe(self._body, self.params, self._rng)
+            if live:
+                self._send(s.msg_id, reading)
+
+    def _observe(self) -> Reading:
+        return observe(self._body, self.params, self._rng)
+
+    def _send(self, msg_id: int, reading: Reading | None) -> None:
+        mav = self._mav
+        b = self._body
+        ap = self.autopilot
+        t_ms = self._t_ms
+        if reading is None:
+            reading = Reading(b.lat_deg, b.lon_deg, b.depth_m, b.heading_deg)
+        if msg_id == Msg.GLOBAL_POSITION_INT:
+            alt_mm = round(-reading.depth_m * 1000.0)  # Sub: altitude negative below the surface
+            mav.global_position_int_send(
+                t_ms, round(reading.lat_deg * 1e7), round(reading.lon_deg * 1e7), alt_mm, alt_mm,
+                _i16(b.ground_north_m_s * 100.0), _i16(b.ground_east_m_s * 100.0), _i16(b.down_m_s * 100.0),
+                round(reading.heading_deg * 100.0) % 36000)
+        elif msg_id == Msg.ATTITUDE:
+            yaw = math.radians(reading.heading_deg)
+            if yaw > math.pi:
+                yaw -= 2.0 * math.pi
+            mav.attitude_send(t_ms, 0.0, 0.0, yaw, 0.0, 0.0, math.radians(b.yaw_rate_deg_s))
+        elif msg_id == Msg.VFR_HUD:
+            throttle = min(100, round(100.0 * b.water_speed_m_s / self.params.max_speed_m_s))
+            mav.vfr_hud_send(b.water_speed_m_s, b.ground_speed_m_s, round(reading.heading_deg) % 360, throttle,
+                             -reading.depth_m, -b.down_m_s)
+        elif msg_id == Msg.HEARTBEAT:
+            base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            if ap.armed:
+                base |= mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+            if ap.mode is SubMode.GUIDED:
+                base |= mavlink.MAV_MODE_FLAG_GUIDED_ENABLED
+            if ap.failsafe_active or ap.battery_failsafe:
+                status = mavlink.MAV_STATE_CRITICAL
+            else:
+                status = mavlink.MAV_STATE_ACTIVE if ap.armed else mavlink.MAV_STATE_STANDBY
+            mav.heartbeat_send(mavlink.MAV_TYPE_SUBMARINE, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(ap.mode),
+                               status)
+        elif msg_id == Msg.SYSTEM_TIME:
+            unix_s = self.world.start_unix_s + self.config.start_offset_s + t_ms / 1000.0
+            mav.system_time_send(max(0, round(unix_s * 1e6)), t_ms)
+        elif msg_id == Msg.EKF_STATUS_REPORT:
+            flags = _EKF_POSITION if ap.position_ok(t_ms / 1000.0) else _EKF_NO_POSITION
+            mav.ekf_status_report_send(flags, 0.02, 0.02, 0.01, 0.02, 0.0)
+        elif msg_id in (Msg.SYS_STATUS, Msg.BATTERY_STATUS):
+            p = self.params
+            pct = round(100.0 * battery_remaining(b, p))
+            mv = round(p.battery_voltage_v * 1000.0)
+            current_ca = min(32767, round(power_w(b, p) / p.battery_voltage_v * 100.0))
+            if msg_id == Msg.SYS_STATUS:
+                health = _SENSORS if ap.prearm_ok(t_ms / 1000.0) else _SENSORS & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+                mav.sys_status_send(_SENSORS, _SENSORS, health, 0, mv, current_ca, pct, 0, 0, 0, 0, 0, 0)
+            else:
+                mah = round(b.energy_used_wh / p.battery_voltage_v * 1000.0)
+                mav.battery_status_send(
+                    0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LION, 32767,
+                    [min(mv, 65534)] + [65535] * 9, current_ca, mah, round(b.energy_used_wh * 36.0), pct)  # hJ
+        elif msg_id == Msg.AUTOPILOT_VERSION:
+            mav.autopilot_version_send(_CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
+        else:
+            return
+        self.stats.messages_out += 1
+
+    def _write_track(self) -> None:
+        assert self._track is not None
+        if self._t_ms == self._track_last_ms:
+            return
+        self._track_last_ms = self._t_ms
+        b = self._body
+        ap = self.autopilot
+        self._track.write(f"{self._t_ms / 1000.0:.3f},{b.lat_deg:.8f},{b.lon_deg:.8f},{b.depth_m:.3f},"
+                          f"{b.heading_deg:.2f},{int(ap.mode)},{int(ap.armed)},{b.energy_used_wh:.5f}\n")
+
+
+def _i16(x: float) -> int:
+    return max(-32768, min(32767, round(x)))
