@@ -40,7 +40,9 @@ from executive.state import (
     VelocityYaw,
 )
 from planner.actions import Action
-from planner.table import PolicyTable
+from planner.table import Lookup, PolicyTable
+
+_HEADING_TOLERANCE_DEG = 3.0  # a rotation is complete within this of its target bearing
 
 OnArrival = Literal["hold", "surface", "drift", "next"]
 
@@ -69,6 +71,9 @@ class HelmConfig:
     retry_s: float = 2.0  # mode and arming requests
     link_loss_timeout_s: float = 30.0
     depth_tolerance_m: float = 0.5
+    # A cell is left only once the vehicle is this fraction of a cell beyond its edge, so that
+    # noise and the current cannot make the decision chatter on a boundary.
+    cell_margin: float = 0.1
     max_mission_time_s: float | None = None
     min_battery_pct: float | None = None
     max_depth_m: float | None = None
@@ -255,8 +260,9 @@ def _choose(
         new = Activity(situation=Situation.NO_TABLE, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
         return _switch(helm, current, new, out, "no valid policy table: surfacing")
     look = table.lookup(lat, lon, depth, heading)
+    look = _sticky(look, current, table, lat, lon, heading, config.cell_margin)
     if current is not None and current.completes and look.reason in ("ok", "unreachable"):
-        if not _complete(current, vehicle, table, look.state):
+        if not _complete(current, vehicle):
             if current.timeout_s is None or now_s - current.started_s <= current.timeout_s:
                 return helm, False
             out.events.append(Event("warning", f"{current.action.name if current.action else '?'} not complete after "
@@ -279,6 +285,23 @@ def _choose(
     assert look.state is not None
     new = _action_activity(look.action, look.state, table, config, now_s)
     return _switch(helm, current, new, out, None)
+
+
+def _sticky(look: Lookup, current: Activity | None, table: PolicyTable, lat: float, lon: float, heading: float,
+            margin: float) -> Lookup:
+    """Keep the current water cell while the vehicle is within ``margin`` of it (hysteresis).
+
+    Arrival and leaving the grid are never delayed; the layer and heading are always the
+    measured ones.
+    """
+    if (margin <= 0.0 or current is None or current.cell is None or look.state is None
+            or look.reason not in ("ok", "unreachable", "land")):
+        return look
+    l, j, i, _k = look.state
+    _, cj, ci, _ = current.cell
+    if (j, i) == (cj, ci) or not table.near_cell(lat, lon, cj, ci, margin) or not table.water[l, cj, ci]:
+        return look
+    return table.lookup_cell((l, cj, ci), heading)
 
 
 def _switch(helm: HelmState, current: Activity | None, new: Activity, out: _Out, text: str | None) -> tuple[HelmState, bool]:
@@ -316,11 +339,14 @@ def _action_activity(action: Action, state: tuple[int, int, int, int], table: Po
     return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(table.depth_m[l]), **base)  # type: ignore[arg-type]
 
 
-def _complete(act: Activity, vehicle: VehicleState, table: PolicyTable, state: tuple[int, int, int, int] | None) -> bool:
+def _complete(act: Activity, vehicle: VehicleState) -> bool:
     if act.goal_k is not None:
-        if state is None or vehicle.heading_deg is None:
+        # Done on the new bearing itself, not on entering its 45-degree bin: a vehicle left on
+        # a bin edge would flip between headings with every wobble.
+        if vehicle.heading_deg is None or not isinstance(act.target, VelocityYaw):
             return False
-        return table.heading_index(state[1], vehicle.heading_deg) == act.goal_k
+        error = (vehicle.heading_deg - act.target.yaw_deg + 180.0) % 360.0 - 180.0
+        return abs(error) <= _HEADING_TOLERANCE_DEG
     if act.goal_depth_m is not None and vehicle.depth_m is not None:
         return abs(vehicle.depth_m - act.goal_depth_m) <= 0.5
     return True

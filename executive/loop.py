@@ -25,6 +25,7 @@ from executive.state import Command, Event, Phase, VehicleState
 from planner.table import PolicyTable
 
 _POLL_S = 0.05  # longest wait in select (wall); heartbeats and link checks run at least this often
+_DRAIN_BUDGET_S = 0.01  # longest burst of input handling (wall) before time-driven work gets its turn
 _HEARTBEAT_PERIOD_S = 1.0  # vehicle time (section 2.1: 1 Hz)
 _STATE_FIELDS = tuple(f.name for f in fields(VehicleState))
 
@@ -110,7 +111,7 @@ class Executive:
                 wait = min(_POLL_S, self._wall_to_heartbeat(wall))
                 ready, _, _ = select.select([fd], [], [], wait)
                 if ready:
-                    self._drain()
+                    self._drain(time.monotonic())
                 self._housekeeping(time.monotonic(), wall0)
         finally:
             summary = self._summary(time.monotonic() - wall0)
@@ -124,8 +125,14 @@ class Executive:
 
     # -- input -------------------------------------------------------------------------
 
-    def _drain(self) -> None:
-        while True:
+    def _drain(self, wall: float) -> None:
+        # Bounded, so that at high speedup a full socket cannot starve the heartbeat
+        # (due every vehicle second) or the wall-time limit.
+        # At least one datagram is read per call.
+        deadline = wall + min(_DRAIN_BUDGET_S, self._wall_to_heartbeat(wall))
+        first = True
+        while first or time.monotonic() < deadline:
+            first = False
             data = self.conn.recv()
             if not data:
                 return

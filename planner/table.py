@@ -191,6 +191,16 @@ class PolicyTable:
         cell = self.locate(lat_deg, lon_deg, depth_m)
         if cell is None:
             return Lookup(Action.UNREACHABLE, "outside_grid", None)
+        return self.lookup_cell(cell, heading_deg)
+
+    def near_cell(self, lat_deg: float, lon_deg: float, j: int, i: int, margin_cells: float) -> bool:
+        """Whether a position lies within ``margin_cells`` of a spacing beyond cell ``(j, i)``'s edges."""
+        reach = 0.5 + margin_cells
+        return (abs((lon_deg - self.lon0_deg) / self.dlon_deg - i) <= reach
+                and abs((lat_deg - self.lat0_deg) / self.dlat_deg - j) <= reach)
+
+    def lookup_cell(self, cell: tuple[int, int, int], heading_deg: float) -> Lookup:
+        """The action for cell ``(l, j, i)`` of the grid and a compass heading."""
         l, j, i = cell
         k = self.heading_index(j, heading_deg) if math.isfinite(heading_deg) else 0
         state = (l, j, i, k)

@@ -91,7 +91,7 @@ def test_forward_waits_for_guided_before_streaming(table):
 
 
 @pytest.mark.parametrize(("action", "dk"), [(Action.ROTATE_LEFT, +1), (Action.ROTATE_RIGHT, -1)])
-def test_rotate_turns_45_degrees_and_holds_until_the_heading_bin_changes(table, action, dk):
+def test_rotate_turns_45_degrees_and_holds_until_on_the_new_bearing(table, action, dk):
     state = _state_with(table, action)
     l, j, i, k = state
     tick = _run(table, _vehicle_at(table, state))
@@ -106,8 +106,13 @@ def test_rotate_turns_45_degrees_and_holds_until_the_heading_bin_changes(table, 
     moved = _vehicle_at(table, state, time_s=101.0, heading_deg=halfway, lat_deg=table.cell_centre(j, i)[0] + 0.3 * table.dlat_deg)
     held = _run(table, moved, helm=tick.helm, now_s=101.0)
     assert held.decision.action == action and not held.decision.changed
-    # Once in the new bin the table is consulted again.
-    done = _run(table, _vehicle_at(table, state, time_s=104.0, heading_deg=goal), helm=held.helm, now_s=104.0)
+    # In the new bin but short of the new bearing: still turning, so it does not stop on the bin's edge.
+    short = _vehicle_at(table, state, time_s=102.0, heading_deg=table.bearing_deg(j, k) + 0.8 * turn)
+    assert table.heading_index(j, short.heading_deg) == (k + dk) % 8
+    still = _run(table, short, helm=held.helm, now_s=102.0)
+    assert still.decision.action == action and not still.decision.changed
+    # On the new bearing (within 3 degrees) the table is consulted again.
+    done = _run(table, _vehicle_at(table, state, time_s=104.0, heading_deg=goal - 2.0), helm=still.helm, now_s=104.0)
     assert done.decision.changed and done.decision.cell == (l, j, i, (k + dk) % 8)
 
 
@@ -236,3 +241,34 @@ def test_an_action_that_never_completes_times_out_once_and_restarts(table):
     assert late.commands  # the turn is commanded again
     after = _run(table, replace(stuck, time_s=100.0 + timeout + 2), helm=late.helm, now_s=100.0 + timeout + 2)
     assert after.events == () and not after.decision.changed
+
+
+def test_a_cell_is_left_only_a_margin_beyond_its_edge(table):
+    """Hysteresis: noise or the current on a cell boundary cannot make the decision chatter."""
+    # A FORWARD state with a water neighbour in the same row whose action at this heading differs.
+    found = [(tuple(int(x) for x in s), di) for s in np.argwhere(table.actions == int(Action.FORWARD)) for di in (1, -1)
+             if 0 <= s[2] + di < table.nx and table.water[s[0], s[1], s[2] + di]
+             and table.actions[s[0], s[1], s[2] + di, s[3]] not in (int(Action.FORWARD), int(Action.AT_GOAL))]
+    assert found, "the demo table has no FORWARD state beside another action"
+    state, di = found[len(found) // 2]
+    l, j, i, k = state
+    lat, lon = table.cell_centre(j, i)
+    first = _run(table, _vehicle_at(table, state))
+    assert first.decision.cell == state
+
+    def at(frac: float, helm, t: float):
+        # frac of a cell past the shared edge, into the neighbour
+        x = lon + di * (0.5 + frac) * table.dlon_deg
+        return _run(table, _vehicle_at(table, state, lon_deg=x, time_s=t), helm=helm, now_s=t)
+
+    inside = at(0.05, first.helm, 101.0)  # 5 % into the neighbour: still this cell's action
+    assert table.locate(lat, lon + di * 0.55 * table.dlon_deg, table.depth_m[l])[2] == i + di
+    assert inside.decision.cell == state and not inside.decision.changed
+    beyond = at(0.15, inside.helm, 102.0)  # beyond the 10 % margin: the neighbour's action
+    assert beyond.decision.changed and beyond.decision.cell[:3] == (l, j, i + di)
+    back = at(-0.05, beyond.helm, 103.0)  # back over the edge by 5 %: the neighbour is kept
+    assert back.decision.cell[:3] == (l, j, i + di) and not back.decision.changed
+    # Without a margin the decision follows the raw cell at once.
+    raw = _run(table, _vehicle_at(table, state, lon_deg=lon + di * 0.55 * table.dlon_deg, time_s=101.0),
+               helm=first.helm, now_s=101.0, config=replace(CONFIG, cell_margin=0.0))
+    assert raw.decision.changed and raw.decision.cell[:3] == (l, j, i + di)
