@@ -5,6 +5,9 @@ PY     := $(VENV)/bin/python
 LRAUV  := $(VENV)/bin/lrauv
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo
+# Where the demo vehicle starts (LON,LAT): open water 16 km west-south-west of the goal.
+DEMO_START ?= -117.96,33.34
+DEMO_SPEEDUP ?= 1000
 
 .PHONY: demo test bench clean sysdeps
 
@@ -24,9 +27,12 @@ $(STAMP): pyproject.toml | sysdeps
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(LRAUV) forecast synth $(OUT)/forecast.nc
+	$(LRAUV) forecast synth $(OUT)/forecast.nc --issue 0
+	$(LRAUV) forecast synth $(OUT)/truth.nc
 	$(LRAUV) plan missions/demo.yaml --forecast $(OUT)/forecast.nc --out $(OUT)/demo.lrpt \
 	  --export-values $(OUT)/values.npz --plot $(OUT)/pictures
+	$(LRAUV) demo --mission missions/demo.yaml --table $(OUT)/demo.lrpt --truth $(OUT)/truth.nc \
+	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --out $(OUT)
 
 test: $(STAMP)
 	$(PY) -m pytest

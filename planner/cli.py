@@ -13,6 +13,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from planner.arguments import CommandParser
 from planner.errors import PlannerError
 
 EXIT_BAD_INPUT = 2
@@ -42,7 +43,7 @@ def _costs(text: str) -> dict[str, float]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="lrauv", description="Feedback motion planning and onboard execution for long-range AUVs.")
+    parser = CommandParser(prog="lrauv", description="Feedback motion planning and onboard execution for long-range AUVs.")
     sub = parser.add_subparsers(dest="command", required=True)
 
     plan = sub.add_parser("plan", help="plan a feedback policy and write the policy table")
@@ -82,6 +83,15 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--seed", type=int, default=0)
     synth.add_argument("--hours", type=int, default=72)
     synth.add_argument("--issue", type=int, help="forecast issue number (error shrinks with each issue); default: the truth")
+
+    # The vehicle side registers its own subcommands; their modules import nothing heavy.
+    from executive.cli import add_parsers as add_executive
+    from vehicle_sim.cli import add_parser as add_sim
+    from vehicle_sim.demo import add_parser as add_demo
+
+    add_executive(sub)
+    add_sim(sub)
+    add_demo(sub)
     return parser
 
 
@@ -93,6 +103,18 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _plan(args)
         if args.command == "forecast":
             return _forecast(args)
+        if args.command in ("exec", "log"):
+            from executive.cli import run as run_executive
+
+            return run_executive(args)
+        if args.command == "sim":
+            from vehicle_sim.cli import run as run_sim
+
+            return run_sim(args)
+        if args.command == "demo":
+            from vehicle_sim.demo import run as run_demo
+
+            return run_demo(args)
     except PlannerError as exc:
         print(f"lrauv: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

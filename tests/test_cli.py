@@ -128,3 +128,13 @@ def test_forecast_info_and_synth(tmp_path):
     assert run("forecast", "synth", str(out), "--hours=6", "--seed=3").returncode == 0
     proc = run("forecast", "info", str(out))
     assert proc.returncode == 0 and "regular lon/lat" in proc.stdout and "7 steps" in proc.stdout
+
+
+def test_negative_longitudes_as_separate_arguments(synthetic_forecast, tmp_path):
+    # West longitudes are negative; `--goal -117.80,33.40,0` must not read as an option.
+    out = tmp_path / "t.lrpt"
+    proc = run("plan", "--forecast", str(synthetic_forecast), "--bbox", "-118.26,33.30,-117.70,33.70", "--nx", "29",
+               "--ny", "21", "--depths", "0,5,10,15", "--goal", "-117.80,33.40,0", "--start", "-118.0,33.5,0,90",
+               "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert out.is_file()

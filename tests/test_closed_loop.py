@@ -1,0 +1,262 @@
+"""The closed loop over real UDP on 127.0.0.1: ``lrauv sim`` as a process, the executive in a thread.
+
+Between them, where a test needs it, a UDP relay that can drop, duplicate and
+reorder datagrams or cut one direction, and that reads the simulator's side of
+the conversation (modes, STATUSTEXT) as a ground station would. Every process
+and thread a test starts is stopped by it.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from executive.helm import HelmConfig  # noqa: E402
+from executive.loop import ExecConfig, Executive  # noqa: E402
+from executive.recorder import read_messages  # noqa: E402
+from executive.state import SubMode  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+LRAUV = [sys.executable, "-m", "planner.cli"]
+READY = "lrauv sim: listening on udp "
+SPEEDUP = 400.0
+
+pytestmark = pytest.mark.slow
+
+
+class Sim:
+    """``lrauv sim`` as a child process on an ephemeral port."""
+
+    def __init__(self, forecast: Path, start: tuple[float, float], *extra: str, track: Path | None = None) -> None:
+        cmd = [*LRAUV, "sim", "--forecast", str(forecast), "--start", f"{start[0]},{start[1]}", "--listen", "127.0.0.1:0",
+               "--speedup", str(SPEEDUP), "--seed", "1", *extra]
+        if track is not None:
+            cmd += ["--track", str(track)]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()
+        if not line.startswith(READY):
+            self.stop()
+            raise AssertionError(f"lrauv sim did not start: {line!r} {self.proc.stderr.read() if self.proc.stderr else ''}")
+        self.port = int(line.strip().rsplit(":", 1)[1])
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.returncode
+
+
+class Relay:
+    """A UDP relay executive <-> simulator with faults; it also listens in on the simulator's side."""
+
+    def __init__(self, sim_port: int, *, seed: int = 7) -> None:
+        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # the executive talks to this
+        self.front.bind(("127.0.0.1", 0))
+        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # this talks to the simulator
+        self.back.bind(("127.0.0.1", 0))
+        self.port = self.front.getsockname()[1]
+        self.sim = ("127.0.0.1", sim_port)
+        self.exec_addr: tuple[str, int] | None = None
+        self.rng = random.Random(seed)
+        self.drop = 0.0  # simulator -> executive
+        self.duplicate = 0.0
+        self.reorder = 0.0
+        self.cut_down = False  # simulator -> executive blocked
+        self.cut_up = False  # executive -> simulator blocked
+        self.modes: list[tuple[float, int]] = []  # (wall time, custom_mode) of the simulator's heartbeats
+        self.texts: list[str] = []
+        self.counts = {"dropped": 0, "duplicated": 0, "reordered": 0}
+        self._held: bytes | None = None
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import select
+
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.front, self.back], [], [], 0.05)
+            for sock in ready:
+                data, addr = sock.recvfrom(65536)
+                if sock is self.front:
+                    self.exec_addr = addr
+                    if not self.cut_up:
+                        self.back.sendto(data, self.sim)
+                else:
+                    self._listen(data)
+                    self._down(data)
+
+    def _listen(self, data: bytes) -> None:
+        for msg in self._parser.parse_buffer(data) or []:
+            if msg.get_type() == "HEARTBEAT" and msg.get_srcComponent() == 1:
+                self.modes.append((time.monotonic(), msg.custom_mode))
+            elif msg.get_type() == "STATUSTEXT":
+                self.texts.append(msg.text)
+
+    def _down(self, data: bytes) -> None:
+        if self.cut_down or self.exec_addr is None:
+            return
+        if self.rng.random() < self.drop:
+            self.counts["dropped"] += 1
+            return
+        if self._held is None and self.rng.random() < self.reorder:
+            self._held = data  # sent after the next datagram
+            self.counts["reordered"] += 1
+            return
+        copies = 2 if self.rng.random() < self.duplicate else 1
+        self.counts["duplicated"] += copies - 1
+        for _ in range(copies):
+            self.front.sendto(data, self.exec_addr)
+        if self._held is not None:
+            self.front.sendto(self._held, self.exec_addr)
+            self._held = None
+
+    def mode(self) -> int | None:
+        return self.modes[-1][1] if self.modes else None
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.front.close()
+        self.back.close()
+
+
+class ExecThread:
+    def __init__(self, table, port: int, log: Path, **helm) -> None:  # type: ignore[no-untyped-def]
+        config = ExecConfig(link=f"udpout:127.0.0.1:{port}", log_path=log, exit_on_arrival=True, linger_s=20.0,
+                            max_wall_s=90.0, helm=HelmConfig(**helm))
+        self.executive = Executive(config, table)
+        self.stop_event = threading.Event()
+        self.summary = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        self.summary = self.executive.run(self.stop_event)
+
+    def join(self, timeout: float = 120.0):  # type: ignore[no-untyped-def]
+        self.thread.join(timeout)
+        if self.thread.is_alive():
+            self.stop_event.set()
+            self.thread.join(10)
+        return self.summary
+
+    def stop(self):  # type: ignore[no-untyped-def]
+        self.stop_event.set()
+        return self.join(10)
+
+
+def _start_near_goal(table, cells: int = 3) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    """A water position ``cells`` cells west of the goal (open water in the built-in forecast)."""
+    lat, lon = table.goal_lat_deg, table.goal_lon_deg - cells * table.dlon_deg
+    assert table.lookup(lat, lon, 0.0, 0.0).reason == "ok"
+    return lon, lat
+
+
+def _wait(predicate, timeout_s: float) -> bool:  # type: ignore[no-untyped-def]
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
+    """``lrauv demo``'s path: sim and exec as separate processes over UDP, to the goal."""
+    from vehicle_sim.demo import read_track, run_closed_loop
+
+    table_path = tmp_path / "demo.lrpt"
+    demo_plan.table.save(table_path)
+    lon, lat = _start_near_goal(demo_plan.table)
+    result = run_closed_loop(table=table_path, mission=REPO / "missions" / "demo.yaml", truth=synthetic_forecast,
+                             start=f"{lon},{lat}", depth_m=0.0, heading_deg=90.0, speedup=SPEEDUP, out=tmp_path,
+                             timeout_s=90.0)
+    assert result.exec_status == 0, result.exec_output
+    assert "goal       reached" in result.exec_output
+    track = read_track(result.track_csv)
+    t = demo_plan.table
+    # The vehicle really is at the goal: within the goal region (radius 1 cell around the goal cell).
+    assert abs(track["lat_deg"][-1] - t.goal_lat_deg) <= 1.6 * t.dlat_deg
+    assert abs(track["lon_deg"][-1] - t.goal_lon_deg) <= 1.6 * t.dlon_deg
+    assert track["energy_used_wh"][-1] > 0
+    decisions = [p for _, _, p in read_messages(result.log_path, ["/executive/decision"])]
+    assert {d["action"] for d in decisions} >= {"FORWARD", "AT_GOAL"}
+
+
+def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan, synthetic_forecast, tmp_path):
+    lon, lat = _start_near_goal(demo_plan.table)
+    sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10")
+    relay = Relay(sim.port)
+    relay.drop, relay.duplicate, relay.reorder = 0.25, 0.10, 0.05
+    ex = None
+    try:
+        ex = ExecThread(demo_plan.table, relay.port, tmp_path / "lossy.mcap")
+        summary = ex.join()
+    finally:
+        if ex is not None:
+            ex.stop()
+        relay.close()
+        sim.stop()
+    assert summary is not None and summary.reached, summary
+    assert relay.counts["dropped"] > 100 and relay.counts["duplicated"] > 50 and relay.counts["reordered"] > 10
+    # No decision went back in time although datagrams came twice and out of order.
+    times = [p["time_s"] for _, _, p in read_messages(tmp_path / "lossy.mcap", ["/executive/decision"])]
+    assert times == sorted(times)
+
+
+def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synthetic_forecast, tmp_path):
+    lon, lat = _start_near_goal(demo_plan.table, cells=6)
+    sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "5")
+    relay = Relay(sim.port)
+    ex = ExecThread(demo_plan.table, relay.port, tmp_path / "hb.mcap")
+    try:
+        assert _wait(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
+        time.sleep(0.2)
+        ex.stop()  # the executive's process dies: no more heartbeats from component 191
+        assert _wait(lambda: any("heartbeat lost" in t for t in relay.texts), 20), relay.texts
+        assert _wait(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
+    finally:
+        ex.stop()
+        relay.close()
+        sim.stop()
+
+
+def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, synthetic_forecast, tmp_path):
+    lon, lat = _start_near_goal(demo_plan.table, cells=6)
+    sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "600")
+    relay = Relay(sim.port)
+    ex = ExecThread(demo_plan.table, relay.port, tmp_path / "silent.mcap", link_loss_timeout_s=30.0)
+    try:
+        assert _wait(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
+        time.sleep(0.2)
+        relay.cut_down = True  # telemetry no longer reaches the executive; its commands still reach the vehicle
+        # After 30 s of vehicle time (extrapolated by the executive's clock) it asks for SURFACE.
+        assert _wait(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
+        relay.cut_down = False
+        summary = ex.stop()
+    finally:
+        ex.stop()
+        relay.close()
+        sim.stop()
+    logs = [p["message"] for _, _, p in read_messages(tmp_path / "silent.mcap", ["/log"])]
+    assert any(m.startswith("link lost") for m in logs), logs
+    assert summary is not None
