@@ -39,6 +39,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/bench_plan.py
+	$(PY) bench/bench_exec.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

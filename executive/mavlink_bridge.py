@@ -69,18 +69,16 @@ def time_boot_s(msg: Any) -> float | None:
 def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
     """The vehicle state after one message from the autopilot (unchanged for other messages)."""
     kind = msg.get_type()
+    # The two per-decision messages build the state directly: 1 us instead of replace()'s 5 us.
+    v = vehicle
     if kind == "GLOBAL_POSITION_INT":
-        heading = None if msg.hdg == _UNKNOWN_HDG else (msg.hdg / 100.0) % 360.0
-        return replace(
-            vehicle,
-            time_s=msg.time_boot_ms / 1000.0,
-            lat_deg=msg.lat / 1e7,
-            lon_deg=msg.lon / 1e7,
-            depth_m=max(0.0, -msg.relative_alt / 1000.0),  # relative_alt is negative below the surface
-            heading_deg=heading if heading is not None else vehicle.heading_deg,
-        )
+        heading = v.heading_deg if msg.hdg == _UNKNOWN_HDG else (msg.hdg / 100.0) % 360.0
+        depth_m = max(0.0, -msg.relative_alt / 1000.0)  # relative_alt is negative below the surface
+        return VehicleState(msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, depth_m, heading, v.mode, v.armed,
+                            v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s)
     if kind == "ATTITUDE":
-        return replace(vehicle, time_s=msg.time_boot_ms / 1000.0, heading_deg=math.degrees(msg.yaw) % 360.0)
+        return VehicleState(msg.time_boot_ms / 1000.0, v.lat_deg, v.lon_deg, v.depth_m, math.degrees(msg.yaw) % 360.0,
+                            v.mode, v.armed, v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s)
     if kind == "HEARTBEAT":
         armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         return replace(vehicle, mode=int(msg.custom_mode), armed=armed, heartbeat_s=now_s)

@@ -173,7 +173,11 @@ class PolicyTable:
         below = 0.5 * (depths[-1] - depths[-2]) if len(depths) > 1 else 2.5
         if depth_m > depths[-1] + below:
             return None
-        l = min(range(len(depths)), key=lambda n: (abs(depths[n] - depth_m), n))
+        l, best = 0, abs(depths[0] - depth_m)
+        for n in range(1, len(depths)):
+            d = abs(depths[n] - depth_m)
+            if d < best:  # strict: a midpoint keeps the lower layer
+                l, best = n, d
         return (l, j, i)
 
     def heading_index(self, j: int, heading_deg: float) -> int:

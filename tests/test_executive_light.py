@@ -11,6 +11,7 @@ HEAVY = ("xarray", "scipy", "numba", "netCDF4", "pyproj", "matplotlib")
 def test_executive_import_path_has_no_heavy_packages():
     code = (
         "import sys, executive.loop, executive.cli, executive.recorder, executive.helm, executive.mavlink_bridge\n"
+        "import planner.mission  # read by `lrauv exec --mission`\n"
         f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
