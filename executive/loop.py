@@ -217,8 +217,11 @@ class Executive:
         msg = bridge.encode(self.mav, cmd, time_boot_ms=int(now_s * 1000) & 0xFFFFFFFF,
                             target_system=self.config.autopilot_system)
         self._send(now_s, msg)
+        self._log(self._record_command, now_s, cmd)
+
+    def _record_command(self, now_s: float, cmd: Command) -> None:
         fields = {name: getattr(cmd, name) for name in cmd.__slots__}  # type: ignore[union-attr]
-        self._log(self.recorder.write, Topic.COMMAND, now_s, {"time_s": now_s, "kind": type(cmd).__name__, **fields})
+        self.recorder.write(Topic.COMMAND, now_s, {"time_s": now_s, "kind": type(cmd).__name__, **fields})
 
     def _send(self, now_s: float, msg: Any) -> None:
         self.mav.send(msg)
