@@ -39,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     p.add_argument("--start", required=True, help="LON,LAT of the vehicle at the start")
     p.add_argument("--depth-m", type=float, default=0.0)
     p.add_argument("--heading-deg", type=float, default=0.0)
-    p.add_argument("--speedup", type=float, default=500.0, help="simulator speedup over real time (default 500)")
+    p.add_argument("--speedup", type=float, default=1000.0, help="simulator speedup over real time (default 1000)")
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="directory for the log, track and pictures")
     p.add_argument("--timeout-s", type=float, default=170.0, help="wall-time limit for the run")
     p.add_argument("--seed", type=int, default=0)
