@@ -36,6 +36,8 @@ from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
 from executive.state import SubMode  # noqa: E402
 from planner.table import PolicyTable  # noqa: E402
+from vehicle_sim.cli import wait_ready  # noqa: E402
+from vehicle_sim.demo import stop_process  # noqa: E402
 
 LRAUV = [sys.executable, "-m", "planner.cli"]
 DEMO_START = "-117.96,33.34"  # as in the Makefile
@@ -102,9 +104,7 @@ def bench_latency(table_path: Path, work: Path, n: int) -> dict[str, float]:
 def _start_sim(truth: Path, work: Path, *extra: str) -> tuple[subprocess.Popen[str], int]:
     sim = subprocess.Popen([*LRAUV, "sim", "--forecast", str(truth), "--start", DEMO_START, "--listen", "127.0.0.1:0",
                             "--quiet", *extra], stdout=subprocess.PIPE, text=True)
-    assert sim.stdout is not None
-    line = sim.stdout.readline()
-    return sim, int(line.strip().rsplit(":", 1)[1])
+    return sim, wait_ready(sim)
 
 
 def _wait4(proc: subprocess.Popen[str]) -> tuple[int, float]:
@@ -124,8 +124,7 @@ def bench_cpu(table: Path, truth: Path, work: Path, seconds: float) -> dict[str,
         _, cpu_s = _wait4(ex)
         wall = time.monotonic() - t0
     finally:
-        sim.terminate()
-        sim.wait()
+        stop_process(sim)
     return {"wall_s": wall, "cpu_s": cpu_s, "cpu_pct": 100.0 * cpu_s / wall}
 
 
@@ -142,9 +141,7 @@ def bench_speedup(table: Path, truth: Path, work: Path, hours: float, speedup: f
         out, _ = ex.communicate(timeout=120)
     finally:
         for p in (ex, sim):
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+            stop_process(p)
     size = (work / "speedup.mcap").stat().st_size
     return {"sim_hours": hours, "asked": speedup, "wall_s": sim_wall, "achieved": duration / sim_wall,
             "log_mib": size / 2**20, "exec_output": out.strip()}

@@ -14,7 +14,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from executive.helm import HelmConfig
 from planner.errors import PlannerError
+from planner.table import PolicyTable
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -54,9 +56,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _exec(args: argparse.Namespace) -> int:
-    from executive.helm import HelmConfig
     from executive.loop import ExecConfig, Executive
-    from planner.table import PolicyTable
 
     data = _read(args.table)
     table = PolicyTable.from_bytes(data, name=str(args.table))
@@ -114,8 +114,8 @@ def _read(path: Path) -> bytes:
         raise PlannerError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
 
 
-def _helm_config(mission_path: Path, table) -> object:  # type: ignore[no-untyped-def]
-    from executive.helm import HelmConfig
+def _helm_config(mission_path: Path, table: PolicyTable) -> HelmConfig:
+    """The helm's figures from a mission whose first goal is the table's goal."""
     from planner.mission import load_mission
 
     m = load_mission(mission_path)

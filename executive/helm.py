@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Literal
 
 from executive.state import (
     Arm,
@@ -40,11 +39,10 @@ from executive.state import (
     VelocityYaw,
 )
 from planner.actions import Action
+from planner.settings import OnArrival
 from planner.table import Lookup, PolicyTable
 
 _HEADING_TOLERANCE_DEG = 3.0  # a rotation is complete within this of its target bearing
-
-OnArrival = Literal["hold", "surface", "drift", "next"]
 
 # Telemetry the executive asks for (message, interval in vehicle seconds); position and
 # attitude drive decisions, the rest is health. Intervals <= 0 disable a stream.
@@ -262,7 +260,7 @@ def _choose(
     look = table.lookup(lat, lon, depth, heading)
     look = _sticky(look, current, table, lat, lon, heading, config.cell_margin)
     if current is not None and current.completes and look.reason in ("ok", "unreachable"):
-        if not _complete(current, vehicle):
+        if not _complete(current, vehicle, config.depth_tolerance_m):
             if current.timeout_s is None or now_s - current.started_s <= current.timeout_s:
                 return helm, False
             out.events.append(Event("warning", f"{current.action.name if current.action else '?'} not complete after "
@@ -339,7 +337,7 @@ def _action_activity(action: Action, state: tuple[int, int, int, int], table: Po
     return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(table.depth_m[l]), **base)  # type: ignore[arg-type]
 
 
-def _complete(act: Activity, vehicle: VehicleState) -> bool:
+def _complete(act: Activity, vehicle: VehicleState, depth_tolerance_m: float) -> bool:
     if act.goal_k is not None:
         # Done on the new bearing itself, not on entering its 45-degree bin: a vehicle left on
         # a bin edge would flip between headings with every wobble.
@@ -348,7 +346,7 @@ def _complete(act: Activity, vehicle: VehicleState) -> bool:
         error = (vehicle.heading_deg - act.target.yaw_deg + 180.0) % 360.0 - 180.0
         return abs(error) <= _HEADING_TOLERANCE_DEG
     if act.goal_depth_m is not None and vehicle.depth_m is not None:
-        return abs(vehicle.depth_m - act.goal_depth_m) <= 0.5
+        return abs(vehicle.depth_m - act.goal_depth_m) <= depth_tolerance_m
     return True
 
 

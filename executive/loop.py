@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import select
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -127,12 +127,9 @@ class Executive:
 
     def _drain(self, wall: float) -> None:
         # Bounded, so that at high speedup a full socket cannot starve the heartbeat
-        # (due every vehicle second) or the wall-time limit.
-        # At least one datagram is read per call.
+        # (due every vehicle second) or the wall-time limit; at least one datagram per call.
         deadline = wall + min(_DRAIN_BUDGET_S, self._wall_to_heartbeat(wall))
-        first = True
-        while first or time.monotonic() < deadline:
-            first = False
+        while True:
             data = self.conn.recv()
             if not data:
                 return
@@ -141,7 +138,7 @@ class Executive:
                 msgs = self.mav.parse_buffer(bytes(data) if not isinstance(data, bytes) else data) or []
             except Exception:  # pymavlink raises on some malformed frames even when robust
                 self._counts["bad"] += 1
-                continue
+                msgs = []
             wall = time.monotonic()
             for msg in msgs:
                 decided = self._on_message(msg, wall)
@@ -150,6 +147,8 @@ class Executive:
                 self._write_later()
                 if decided:
                     self.message_cost.add(time.perf_counter() - t0)
+            if wall >= deadline:
+                return
 
     def _log(self, fn: Any, *args: Any, **kwargs: Any) -> None:
         self._later.append((fn, args, kwargs))
@@ -168,6 +167,11 @@ class Executive:
         self._counts["in"] += 1
         t_boot = bridge.time_boot_s(msg)
         mine = bridge.from_autopilot(msg, self.config.autopilot_system)
+        if mine and t_boot is not None and not self.clock.synced and self.vehicle.heartbeat_s is not None:
+            # HEARTBEAT carries no time_boot_ms: one heard before the first timestamp was stamped
+            # 0 s. Move it to the vehicle's time base, or an autopilot that booted more than the
+            # link-loss timeout ago would look silent at once.
+            self.vehicle = replace(self.vehicle, heartbeat_s=t_boot)
         if mine and t_boot is not None and self.clock.observe(t_boot, wall):
             self._event(t_boot, Event("warning", "autopilot time went back: it rebooted; setting up again"))
             self.vehicle = VehicleState()

@@ -17,9 +17,8 @@ import yaml
 
 from planner.errors import MissionError, PlannerError
 from planner.grid import BBox
-from planner.settings import Costs, Criterion, Goal, Model, PlanSettings, Uncertainty
+from planner.settings import Costs, Criterion, Goal, Model, OnArrival, PlanSettings, Uncertainty
 
-OnArrival = Literal["hold", "surface", "drift", "next"]
 BreachAction = Literal["surface", "drift", "hold"]
 MAX_GOALS = 1000
 

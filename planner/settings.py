@@ -12,6 +12,7 @@ from planner.errors import GoalError, PlannerError
 Criterion = Literal["robust", "optimistic"]
 Uncertainty = Literal["lateral", "none"]
 Model = Literal["paper"]
+OnArrival = Literal["hold", "surface", "drift", "next"]  # at a goal (docs/missions.md); the executive's too
 
 DEFAULT_CALM_SPEED_M_S = 0.01  # spec section 3
 

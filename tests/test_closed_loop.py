@@ -26,10 +26,11 @@ from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
 from executive.recorder import read_messages  # noqa: E402
 from executive.state import SubMode  # noqa: E402
+from vehicle_sim.cli import wait_ready  # noqa: E402
+from vehicle_sim.demo import stop_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 LRAUV = [sys.executable, "-m", "planner.cli"]
-READY = "lrauv sim: listening on udp "
 SPEEDUP = 400.0
 
 pytestmark = pytest.mark.slow
@@ -44,21 +45,14 @@ class Sim:
         if track is not None:
             cmd += ["--track", str(track)]
         self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        assert self.proc.stdout is not None
-        line = self.proc.stdout.readline()
-        if not line.startswith(READY):
+        try:
+            self.port = wait_ready(self.proc)
+        except Exception:
             self.stop()
-            raise AssertionError(f"lrauv sim did not start: {line!r} {self.proc.stderr.read() if self.proc.stderr else ''}")
-        self.port = int(line.strip().rsplit(":", 1)[1])
+            raise
 
     def stop(self) -> int:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc)
         return self.proc.returncode
 
 

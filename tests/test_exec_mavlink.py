@@ -233,3 +233,17 @@ def test_the_log_has_every_run_element(rig):
     assert policy["forecast"]["identity"] == table.forecast_identity
     decisions = [p for _, _, p in read_messages(log_path, ["/executive/decision"])]
     assert decisions and decisions[-1]["action"] == "FORWARD" and decisions[-1]["cell"] == list(fwd)
+
+
+def test_an_autopilot_booted_long_ago_is_not_taken_for_a_silent_one(rig):
+    """ArduSub's first HEARTBEAT has no time_boot_ms; its uptime may exceed the link-loss timeout."""
+    ap = rig.ap
+    ap.time_ms = 600_000  # booted 10 minutes ago; link-loss timeout 30 s
+    ap.heartbeat()
+    time.sleep(0.3)  # the executive runs its housekeeping with only the heartbeat heard
+    ap.position(33.45, -118.1, 0.0, 0.0)
+    time.sleep(0.3)
+    rig.stop()
+    texts = [p["message"] for _, _, p in read_messages(rig.log_path, ["/log"])]
+    assert "autopilot heartbeat received" in texts
+    assert not [t for t in texts if "link lost" in t], texts

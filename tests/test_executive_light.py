@@ -8,21 +8,20 @@ import sys
 HEAVY = ("xarray", "scipy", "numba", "netCDF4", "pyproj", "matplotlib")
 
 
+def _heavy_after(code: str) -> str:
+    """The heavy packages loaded by ``code`` in a fresh interpreter, comma-separated."""
+    probe = f"import sys\n{code}\nprint(','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.strip()
+
+
 def test_executive_import_path_has_no_heavy_packages():
-    code = (
-        "import sys, executive.loop, executive.cli, executive.recorder, executive.helm, executive.mavlink_bridge\n"
-        "import planner.mission  # read by `lrauv exec --mission`\n"
-        f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
+    loaded = _heavy_after(
+        "import executive.loop, executive.cli, executive.recorder, executive.helm, executive.mavlink_bridge\n"
+        "import planner.mission  # read by `lrauv exec --mission`"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "", f"the executive imported {out.stdout.strip()}"
+    assert loaded == "", f"the executive imported {loaded}"
 
 
 def test_lrauv_exec_help_loads_nothing_heavy():
-    code = (
-        "import sys\nfrom planner.cli import build_parser\n"
-        "build_parser().parse_args(['exec', '--table', 'x.lrpt'])\n"
-        f"print(','.join(m for m in {HEAVY!r} if m in sys.modules))\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == ""
+    loaded = _heavy_after("from planner.cli import build_parser\nbuild_parser().parse_args(['exec', '--table', 'x.lrpt'])")
+    assert loaded == "", f"`lrauv exec` argument parsing imported {loaded}"

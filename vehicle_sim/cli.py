@@ -13,6 +13,7 @@ import argparse
 import datetime as dt
 import math
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``python -m vehicle_sim [sim] ...``; returns the exit status."""
     parser = CommandParser(prog="python -m vehicle_sim", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_arguments(parser)
     args_list = list(sys.argv[1:] if argv is None else argv)
     if args_list[:1] == ["sim"]:
@@ -105,6 +106,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except PlannerError as exc:
         print(f"lrauv sim: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+
+
+def wait_ready(sim: subprocess.Popen[str], *, timeout_s: float = 60.0) -> int:
+    """The UDP port of a started ``lrauv sim`` child, read from its ready line."""
+    assert sim.stdout is not None
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        line = sim.stdout.readline()
+        if line.startswith(READY_PREFIX):
+            return int(line[len(READY_PREFIX):].strip().rsplit(":", 1)[1])
+        if not line and sim.poll() is not None:
+            err = sim.stderr.read() if sim.stderr else ""
+            raise SimError(f"the simulator exited with status {sim.returncode}: {err.strip()}")
+    raise SimError(f"the simulator did not report its port within {timeout_s:g} s")
 
 
 # -- parsing ----------------------------------------------------------------------------------

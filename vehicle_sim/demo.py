@@ -17,9 +17,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from planner.errors import PlannerError
-
-_READY = "lrauv sim: listening on udp "
+from vehicle_sim.cli import wait_ready
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,8 +58,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: str, depth_m: float, heading_deg: float,
-                    speedup: float, out: Path, timeout_s: float, seed: int = 0,
-                    extra_sim: tuple[str, ...] = (), extra_exec: tuple[str, ...] = ()) -> DemoResult:
+                    speedup: float, out: Path, timeout_s: float, seed: int = 0) -> DemoResult:
     """Run sim and exec as processes until the executive exits; returns its status and output."""
     t0 = time.monotonic()
     lrauv = [sys.executable, "-m", "planner.cli"]
@@ -69,13 +66,13 @@ def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: st
     log = out / "demo.mcap"
     sim_cmd = [*lrauv, "sim", "--forecast", str(truth), "--start", start, "--depth-m", str(depth_m),
                "--heading-deg", str(heading_deg), "--speedup", str(speedup), "--listen", "127.0.0.1:0",
-               "--seed", str(seed), "--track", str(track), *extra_sim]
+               "--seed", str(seed), "--track", str(track)]
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ex: subprocess.Popen[str] | None = None
     try:
-        port = _wait_ready(sim, timeout_s=60.0)
+        port = wait_ready(sim)
         exec_cmd = [*lrauv, "exec", "--table", str(table), "--link", f"udpout:127.0.0.1:{port}", "--log", str(log),
-                    "--exit-on-arrival", "--max-wall-s", str(timeout_s), *extra_exec]
+                    "--exit-on-arrival", "--max-wall-s", str(timeout_s)]
         if mission is not None:
             exec_cmd += ["--mission", str(mission)]
         ex = subprocess.Popen(exec_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -83,24 +80,12 @@ def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: st
         status = ex.returncode
     finally:
         for proc in (ex, sim):
-            _stop(proc)
+            stop_process(proc)
     return DemoResult(exec_status=status, exec_output=output, track_csv=track, log_path=log, wall_s=time.monotonic() - t0)
 
 
-def _wait_ready(sim: subprocess.Popen[str], *, timeout_s: float) -> int:
-    assert sim.stdout is not None
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        line = sim.stdout.readline()
-        if line.startswith(_READY):
-            return int(line[len(_READY):].strip().rsplit(":", 1)[1])
-        if not line and sim.poll() is not None:
-            err = sim.stderr.read() if sim.stderr else ""
-            raise PlannerError(f"the simulator exited with status {sim.returncode}: {err.strip()}")
-    raise PlannerError(f"the simulator did not report its port within {timeout_s:g} s")
-
-
-def _stop(proc: subprocess.Popen[str] | None) -> None:
+def stop_process(proc: subprocess.Popen[str] | None) -> None:
+    """Terminate a child (kill it after 10 s) and reap it; nothing if it already exited."""
     if proc is None or proc.poll() is not None:
         return
     proc.terminate()
