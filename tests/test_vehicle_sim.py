@@ -661,7 +661,8 @@ def test_simulated_time_runs_at_the_speedup(threaded):
 
 
 def test_garbage_datagrams_do_not_crash_it(threaded):
-    sim = threaded(speedup=1e9)
+    # A modest speedup: flat out, telemetry floods the peer's socket and can push the ACK out of it.
+    sim = threaded(speedup=100)
     peer = Peer(sim.port)
     raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:

@@ -1,6 +1,8 @@
 """``lrauv sim`` / ``python -m vehicle_sim``: run the simulated vehicle on a truth forecast.
 
-Parses the flags once into a ``SimConfig`` and a ``World``, prints one ready line to stdout
+Parses the flags once into a ``SimConfig`` and a ``World`` (or, with several ``--forecast``
+files or a directory, a ``TruthSequence``: each forecast is the truth from its own first
+time until the next one's), prints one ready line to stdout
 (``lrauv sim: listening on udp HOST:PORT``, the port really bound), then runs until
 ``--duration-s`` simulated seconds have passed or SIGTERM/SIGINT arrives (exit 0 either way,
 the track flushed). Bad input raises ``SimError`` (a ``PlannerError``); ``main`` prints it as
@@ -44,7 +46,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
     # Values are parsed in `run`, so that every bad value gets the same one-line error.
-    p.add_argument("--forecast", type=Path, help="netCDF forecast used as the true currents")
+    p.add_argument("--forecast", type=Path, action="append", metavar="FILE_OR_DIR",
+                   help="netCDF forecast used as the true currents; repeat the flag (or give a directory: every "
+                        "*.nc in it) for a sequence of dated forecasts, each the truth from its own first time "
+                        "until the next one's (e.g. a later issue taking over)")
     p.add_argument("--calm", action="store_true", help="no forecast: still water everywhere")
     p.add_argument("--start", help="LON,LAT of the vehicle at boot (with --calm: ArduSub's autotest site)")
     p.add_argument("--depth-m", default="0", help="depth at boot, m (default 0)")
@@ -126,10 +131,10 @@ def wait_ready(sim: subprocess.Popen[str], *, timeout_s: float = 60.0) -> int:
 
 
 def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    """(World, SimConfig, duration_s or None) from the flags."""
+    """(World or TruthSequence, SimConfig, duration_s or None) from the flags."""
     from vehicle_sim.autopilot import AutopilotSettings, FailsafeAction
     from vehicle_sim.endpoint import SimConfig
-    from vehicle_sim.world import World
+    from vehicle_sim.world import World, load_truth
 
     speedup = _number(args.speedup, "--speedup", "a number > 0", lambda x: x > 0)
     host, port = _listen(args.listen)
@@ -155,7 +160,7 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             raise SimError("--forecast: expected a netCDF forecast file (or --calm for still water)")
         if args.start is None:
             raise SimError("--start: expected LON,LAT of the vehicle at boot, e.g. --start -118.10,33.45")
-        world = World.load(args.forecast)
+        world = load_truth(_forecast_paths(args.forecast))
         start = args.start
     lon, lat = _lon_lat(start)
     offset_s = _start_offset(args.start_time, world)
@@ -169,6 +174,13 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         track_path=args.track,
     )
     return world, config, duration
+
+
+def _forecast_paths(value: Path | str | Sequence[Path | str]) -> list[Path]:
+    """The ``--forecast`` values as a list (one path given directly, as older callers do, too)."""
+    if isinstance(value, (str, Path)):
+        return [Path(value)]
+    return [Path(v) for v in value]
 
 
 def _number(text: str, flag: str, expected: str, ok) -> float:  # type: ignore[no-untyped-def]
@@ -239,7 +251,8 @@ def _check_start(world, lon: float, lat: float, depth_m: float, offset_s: float,
     if depth_m > world.max_depth_m:
         raise SimError(f"--depth-m {depth_m:g}: deeper than the forecast's deepest level ({world.max_depth_m:g} m)")
     if not world.is_water(lat, lon, depth_m, offset_s):
-        raise SimError(f"--start {text}: on land at {depth_m:g} m in {world.source}; expected a water point")
+        raise SimError(f"--start {text}: on land at {depth_m:g} m in {world.source_at(offset_s)}; "
+                       "expected a water point")
 
 
 def _install_stop_handlers(stop: threading.Event):  # type: ignore[no-untyped-def]

@@ -44,7 +44,7 @@ from vehicle_sim.autopilot import (  # noqa: E402
     clip_text,
 )
 from vehicle_sim.dynamics import Body, Reading, VehicleParams, battery_remaining, observe, power_w, step  # noqa: E402
-from vehicle_sim.world import World  # noqa: E402
+from vehicle_sim.world import Truth  # noqa: E402
 
 SYSTEM_ID = 1
 COMPONENT_ID = mavlink.MAV_COMP_ID_AUTOPILOT1  # 1
@@ -138,7 +138,7 @@ class _Stream:
 class Simulator:
     """A simulated ArduSub-like LRAUV behind a UDP socket. Use as a context manager or call ``close``."""
 
-    def __init__(self, world: World, config: SimConfig) -> None:
+    def __init__(self, world: Truth, config: SimConfig) -> None:
         self.world = world
         self.config = config
         self.params = config.params

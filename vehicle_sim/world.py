@@ -14,6 +14,11 @@ land (NaN) node is land; shallower than the first level takes the first level; d
 the last level, or outside the lon/lat box, is not covered. Where there is no water the
 current is 0 and ``is_water`` says False. Times before the first or after the last forecast
 time take the first or last field.
+
+A ``TruthSequence`` strings several dated Worlds together in order of their first times
+(e.g. successive forecast issues, a later issue serving as truth): at time ``t`` the current
+comes from the latest member whose first time is <= ``t`` (the first member before any).
+``load_truth`` reads one file (a plain ``World``), several files, or a directory of ``*.nc``.
 """
 
 from __future__ import annotations
@@ -22,9 +27,10 @@ import math
 import os
 import warnings
 from bisect import bisect_right
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -153,6 +159,9 @@ class World:
         """Deepest depth with currents (inf when the forecast has no depth axis)."""
         return self.depth_covered_m
 
+    def source_at(self, t_s: float) -> str:
+        """The file that gives the current at ``t_s``."""
+        return self.source
 
     def current_at(self, t_s: float, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[float, float]:
         """(east, north) current in m/s at a point; (0, 0) where there is no water."""
@@ -213,6 +222,150 @@ class World:
             self._cache.clear()
         self._cache[key] = block
         return block
+
+
+class Truth(Protocol):
+    """What the simulator asks of its true ocean: a ``World`` or a ``TruthSequence``.
+
+    Times ``t_s`` are seconds after ``start_unix_s``.
+    """
+
+    @property
+    def source(self) -> str: ...
+    @property
+    def start_unix_s(self) -> float: ...
+    @property
+    def dated(self) -> bool: ...
+    @property
+    def duration_s(self) -> float: ...
+    @property
+    def bbox(self) -> BBox: ...
+    @property
+    def max_depth_m(self) -> float: ...
+    def source_at(self, t_s: float) -> str: ...
+    def current_at(self, t_s: float, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[float, float]: ...
+    def is_water(self, lat_deg: float, lon_deg: float, depth_m: float, t_s: float = 0.0) -> bool: ...
+
+
+@dataclass(frozen=True, eq=False)
+class TruthSequence:
+    """Dated Worlds one after another: each is the truth from its own first time until the next one's.
+
+    ``members`` are sorted by ``start_unix_s`` at construction; ``t_s`` counts from the first
+    member's start. At ``t_s`` the latest member with ``start <= t_s`` answers, at its own
+    time ``t_s - offset`` (so past its last time it holds its last field until the next
+    member takes over); before the first start the first member answers. Members may
+    overlap in time and need not share a grid; ``bbox`` and ``max_depth_m`` are what every
+    member covers. Two members with the same start, or an undated member among several,
+    raise ``WorldError``.
+    """
+
+    members: tuple[World, ...]
+    offsets_s: tuple[float, ...] = field(init=False)  # member i's start, seconds after the first's
+
+    def __post_init__(self) -> None:
+        ordered = _ordered_members(tuple(self.members))
+        object.__setattr__(self, "members", ordered)
+        object.__setattr__(self, "offsets_s", tuple(w.start_unix_s - ordered[0].start_unix_s for w in ordered))
+        _common_box(ordered)  # raises when the members share no area
+
+    @property
+    def source(self) -> str:
+        return " + ".join(w.source for w in self.members)
+
+    @property
+    def start_unix_s(self) -> float:
+        return self.members[0].start_unix_s
+
+    @property
+    def dated(self) -> bool:
+        return all(w.dated for w in self.members)
+
+    @property
+    def duration_s(self) -> float:
+        """Last time any member covers, seconds after the first start."""
+        return max(off + w.duration_s for off, w in zip(self.offsets_s, self.members, strict=True))
+
+    @property
+    def bbox(self) -> BBox:
+        """The lon/lat box every member covers (in the first member's longitude convention)."""
+        return _common_box(self.members)
+
+    @property
+    def max_depth_m(self) -> float:
+        """Deepest depth every member covers."""
+        return min(w.max_depth_m for w in self.members)
+
+    def source_at(self, t_s: float) -> str:
+        return self.members[self._index(t_s)].source
+
+    def current_at(self, t_s: float, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[float, float]:
+        """(east, north) current in m/s from the member in charge at ``t_s``; (0, 0) where there is no water."""
+        i = self._index(t_s)
+        return self.members[i].current_at(t_s - self.offsets_s[i], lat_deg, lon_deg, depth_m)
+
+    def is_water(self, lat_deg: float, lon_deg: float, depth_m: float, t_s: float = 0.0) -> bool:
+        i = self._index(t_s)
+        return self.members[i].is_water(lat_deg, lon_deg, depth_m, t_s - self.offsets_s[i])
+
+    def _index(self, t_s: float) -> int:
+        i = bisect_right(self.offsets_s, t_s) - 1
+        return i if i > 0 else 0
+
+
+def load_truth(paths: Iterable[str | os.PathLike[str]]) -> World | TruthSequence:
+    """The truth from forecast files: one file is a plain ``World``, several a ``TruthSequence``.
+
+    A directory stands for every ``*.nc`` directly in it. Errors name the file.
+    """
+    files = [f for p in paths for f in forecast_files(p)]
+    if not files:
+        raise WorldError("no forecast given; expected one or more netCDF files or a directory of them")
+    worlds = [World.load(f) for f in files]
+    return worlds[0] if len(worlds) == 1 else TruthSequence(tuple(worlds))
+
+
+def forecast_files(path: str | os.PathLike[str]) -> list[str]:
+    """``[path]`` for a file (checked on load), or the ``*.nc`` files of a directory, sorted by name."""
+    if not os.path.isdir(path):
+        return [os.fspath(path)]
+    found = sorted(e.path for e in os.scandir(path) if e.name.endswith(".nc") and e.is_file())
+    if not found:
+        raise WorldError(f"{os.fspath(path)}: no *.nc files in this directory; expected netCDF forecasts")
+    return found
+
+
+def _ordered_members(members: tuple[World, ...]) -> tuple[World, ...]:
+    """``members`` sorted by start time; checks there is one, all are dated (when several), starts differ."""
+    if not members:
+        raise WorldError("truth sequence: expected at least one forecast")
+    if len(members) > 1:
+        for w in members:
+            if not w.dated:
+                raise WorldError(f"{w.source}: its times have no reference date; every forecast of a truth "
+                                 "sequence needs one (time units like 'hours since 2026-01-15 00:00:00')")
+    ordered = tuple(sorted(members, key=lambda w: w.start_unix_s))
+    for a, b in pairwise(ordered):
+        if b.start_unix_s == a.start_unix_s:
+            raise WorldError(f"{b.source}: starts at the same time as {a.source}; expected one forecast per "
+                             "start time in a truth sequence")
+    return ordered
+
+
+def _common_box(members: tuple[World, ...]) -> BBox:
+    """Intersection of the members' lon/lat boxes, longitudes shifted by 360 to the first's convention."""
+    first = members[0].bbox
+    west, south, east, north = first.west_deg, first.south_deg, first.east_deg, first.north_deg
+    mid = 0.5 * (west + east)
+    for w in members[1:]:
+        box = w.bbox
+        shift = 360.0 * round((mid - 0.5 * (box.west_deg + box.east_deg)) / 360.0)
+        west, east = max(west, box.west_deg + shift), min(east, box.east_deg + shift)
+        south, north = max(south, box.south_deg), min(north, box.north_deg)
+        if not (west < east and south < north):
+            raise WorldError(f"{w.source}: shares no lon/lat area with the other forecasts of the truth sequence; "
+                             "expected forecasts of one region")
+    return BBox(west_deg=west, south_deg=south, east_deg=east, north_deg=north)
 
 
 def _bracket(axis: tuple[float, ...], x: float) -> tuple[int, float]:
