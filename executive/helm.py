@@ -38,10 +38,14 @@ from executive.state import (
     VehicleState,
     VelocityYaw,
 )
+from executive.geofence import inside
 from planner.actions import Action
-from planner.settings import OnArrival
+from planner.settings import BreachAction, OnArrival
 from planner.table import Lookup, PolicyTable
 
+# The mode for each on_breach action (ArduSub: SURFACE ascends, ALT_HOLD holds depth without
+# horizontal thrust, GUIDED holds a position).
+BREACH_MODE: dict[str, SubMode] = {"surface": SubMode.SURFACE, "drift": SubMode.ALT_HOLD, "hold": SubMode.GUIDED}
 _HEADING_TOLERANCE_DEG = 3.0  # a rotation is complete within this of its target bearing
 
 # Telemetry the executive asks for (message, interval in vehicle seconds); position and
@@ -75,6 +79,8 @@ class HelmConfig:
     max_mission_time_s: float | None = None
     min_battery_pct: float | None = None
     max_depth_m: float | None = None
+    geofence: tuple[tuple[float, float], ...] | None = None  # (lon_deg, lat_deg) vertices
+    on_breach: BreachAction = "surface"  # for every safety limit and link loss (docs/missions.md)
     rates: tuple[tuple[str, float], ...] = DEFAULT_RATES
 
 
@@ -191,12 +197,15 @@ def _due(last_s: float | None, now_s: float, period_s: float) -> bool:
 def _link_lost(helm: HelmState, config: HelmConfig, now_s: float, out: _Out) -> Tick:
     if helm.phase is Phase.WAIT_LINK:
         return Tick(helm)
+    mode = BREACH_MODE[config.on_breach]
     if helm.phase is not Phase.LINK_LOST:
-        out.events.append(Event("error", f"link lost: no autopilot heartbeat for {config.link_loss_timeout_s:g} s; asking for SURFACE"))
+        out.events.append(Event("error", f"link lost: no autopilot heartbeat for {config.link_loss_timeout_s:g} s;"
+                                         f" on_breach {config.on_breach}: asking for {mode.name}"))
         helm = replace(helm, phase=Phase.LINK_LOST, mode_request_s=None)
-    # Best effort: if only the downlink is lost the vehicle still hears this.
+    # Best effort: if only the downlink is lost the vehicle still hears this. GUIDED with no
+    # new target holds station on ArduSub; ALT_HOLD without thrust drifts at depth.
     if _due(helm.mode_request_s, now_s, config.retry_s):
-        out.commands.append(SetMode(SubMode.SURFACE))
+        out.commands.append(SetMode(mode))
         helm = replace(helm, mode_request_s=now_s)
     return Tick(helm, tuple(out.commands), tuple(out.events))
 
@@ -233,7 +242,21 @@ def _safety(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: f
         return Situation.LOW_BATTERY, f"battery {vehicle.battery_pct:.0f} % is under min_battery_pct {config.min_battery_pct:g}"
     if config.max_depth_m is not None and vehicle.depth_m is not None and vehicle.depth_m > config.max_depth_m:
         return Situation.TOO_DEEP, f"depth {vehicle.depth_m:.1f} m exceeds max_depth_m {config.max_depth_m:g}"
+    if (config.geofence is not None and vehicle.lat_deg is not None and vehicle.lon_deg is not None
+            and not inside(vehicle.lon_deg, vehicle.lat_deg, config.geofence)):
+        return Situation.GEOFENCE, f"position {vehicle.lat_deg:.5f}, {vehicle.lon_deg:.5f} is outside the geofence"
     return None
+
+
+def _breach(situation: Situation, vehicle: VehicleState, config: HelmConfig, now_s: float) -> Activity:
+    """The configured ``on_breach`` behaviour where the breach happened."""
+    mode = BREACH_MODE[config.on_breach]
+    target: Command | None = None
+    if config.on_breach == "drift":
+        target = DepthTarget(float(vehicle.depth_m or 0.0))
+    elif config.on_breach == "hold":
+        target = PositionTarget(float(vehicle.lat_deg), float(vehicle.lon_deg), float(vehicle.depth_m or 0.0))  # type: ignore[arg-type]
+    return Activity(situation=situation, action=None, cell=None, mode=mode, target=target, started_s=now_s)
 
 
 def _choose(
@@ -246,8 +269,8 @@ def _choose(
     breach = _safety(helm, vehicle, config, now_s)
     if breach is not None:
         situation, text = breach
-        out.events.append(Event("error", f"{text}: surfacing, plan suspended"))
-        act = Activity(situation=situation, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
+        out.events.append(Event("error", f"{text}: on_breach {config.on_breach}, plan suspended"))
+        act = _breach(situation, vehicle, config, now_s)
         return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_request_s=None), True
     if helm.phase is Phase.ARRIVED and current is not None:
         return helm, False

@@ -29,8 +29,8 @@ class Phase(Enum):
     SETUP = "setup"  # set message rates, get a position estimate, GUIDED and armed
     RUNNING = "running"  # following the policy table
     ARRIVED = "arrived"  # at a goal: on_arrival behaviour (hold, surface, drift)
-    SAFE = "safe"  # a safety rule fired (time, battery, depth): surfaced, plan suspended
-    LINK_LOST = "link_lost"  # no autopilot heartbeat within the timeout: ask for SURFACE
+    SAFE = "safe"  # a safety limit fired (time, battery, depth, geofence): on_breach, plan suspended
+    LINK_LOST = "link_lost"  # no autopilot heartbeat within the timeout: ask for on_breach's mode
 
 
 @unique
@@ -44,9 +44,10 @@ class Situation(Enum):
     OUTSIDE_GRID = "outside_grid"  # outside the planned volume: surface
     NO_POSITION = "no_position"  # no position yet: nothing to decide
     NO_TABLE = "no_table"  # no valid table loaded: surface
-    MISSION_TIME = "mission_time"  # max_mission_time_h exceeded: surface
-    LOW_BATTERY = "low_battery"  # battery under min_battery_pct: surface
-    TOO_DEEP = "too_deep"  # deeper than max_depth_m: surface
+    MISSION_TIME = "mission_time"  # max_mission_time_h exceeded: on_breach (surface by default)
+    LOW_BATTERY = "low_battery"  # battery under min_battery_pct: on_breach
+    TOO_DEEP = "too_deep"  # deeper than max_depth_m: on_breach
+    GEOFENCE = "geofence"  # outside the mission's geofence: on_breach
     LINK_LOST = "link_lost"
 
 

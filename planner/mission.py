@@ -11,15 +11,14 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, get_args
+from typing import Any, get_args
 
 import yaml
 
 from planner.errors import MissionError, PlannerError
 from planner.grid import BBox
-from planner.settings import Costs, Criterion, Goal, Model, OnArrival, PlanSettings, Uncertainty
+from planner.settings import BreachAction, Costs, Criterion, Goal, Model, OnArrival, PlanSettings, Uncertainty
 
-BreachAction = Literal["surface", "drift", "hold"]
 MAX_GOALS = 1000
 
 

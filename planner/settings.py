@@ -13,6 +13,7 @@ Criterion = Literal["robust", "optimistic"]
 Uncertainty = Literal["lateral", "none"]
 Model = Literal["paper"]
 OnArrival = Literal["hold", "surface", "drift", "next"]  # at a goal (docs/missions.md); the executive's too
+BreachAction = Literal["surface", "drift", "hold"]  # when a safety limit is breached (docs/missions.md)
 
 DEFAULT_CALM_SPEED_M_S = 0.01  # spec section 3
 

@@ -213,7 +213,9 @@ def test_link_loss_asks_for_surface_and_recovers(table):
     ("config", "vehicle_kw", "situation"),
     [(replace(CONFIG, max_mission_time_s=50.0), {}, Situation.MISSION_TIME),
      (replace(CONFIG, min_battery_pct=20.0), {"battery_pct": 15.0}, Situation.LOW_BATTERY),
-     (replace(CONFIG, max_depth_m=4.0), {"depth_m": 6.0}, Situation.TOO_DEEP)],
+     (replace(CONFIG, max_depth_m=4.0), {"depth_m": 6.0}, Situation.TOO_DEEP),
+     # a fence around a far-away square: the vehicle is outside it
+     (replace(CONFIG, geofence=((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))), {}, Situation.GEOFENCE)],
 )
 def test_safety_limits_surface_and_suspend_the_plan(table, config, vehicle_kw, situation):
     vehicle = _vehicle_at(table, _state_with(table, Action.FORWARD), **vehicle_kw)
@@ -272,3 +274,38 @@ def test_a_cell_is_left_only_a_margin_beyond_its_edge(table):
     raw = _run(table, _vehicle_at(table, state, lon_deg=lon + di * 0.55 * table.dlon_deg, time_s=101.0),
                helm=first.helm, now_s=101.0, config=replace(CONFIG, cell_margin=0.0))
     assert raw.decision.changed and raw.decision.cell[:3] == (l, j, i + di)
+
+
+@pytest.mark.parametrize(("on_breach", "mode", "target"), [
+    ("surface", SubMode.SURFACE, None), ("drift", SubMode.ALT_HOLD, DepthTarget), ("hold", SubMode.GUIDED, PositionTarget)])
+def test_a_breach_does_what_on_breach_says(table, on_breach, mode, target):
+    vehicle = _vehicle_at(table, _state_with(table, Action.FORWARD), depth_m=6.0)
+    config = replace(CONFIG, max_depth_m=4.0, on_breach=on_breach)
+    tick = _run(table, replace(vehicle, mode=int(SubMode.MANUAL)), config=config)
+    assert tick.helm.phase is Phase.SAFE and tick.decision.situation is Situation.TOO_DEEP
+    assert tick.commands == (SetMode(mode),) and f"on_breach {on_breach}" in tick.events[0].text
+    there = _run(table, replace(vehicle, mode=int(mode), time_s=101.0), helm=tick.helm, now_s=101.0, config=config)
+    if target is None:
+        assert there.commands == ()
+    else:  # the breach position (or its depth) is held, not the plan's next target
+        assert len(there.commands) == 1 and isinstance(there.commands[0], target)
+        assert there.commands[0].depth_m == pytest.approx(6.0)
+        if target is PositionTarget:
+            assert there.commands[0].lat_deg == pytest.approx(vehicle.lat_deg)
+
+
+def test_link_loss_asks_for_the_on_breach_mode(table):
+    vehicle = _vehicle_at(table, _state_with(table, Action.FORWARD))
+    config = replace(CONFIG, on_breach="hold")
+    running = _run(table, vehicle, config=config)
+    lost = step(running.helm, vehicle, table, config, now_s=140.0, link_ok=False)
+    assert lost.helm.phase is Phase.LINK_LOST and lost.commands == (SetMode(SubMode.GUIDED),)
+
+
+def test_geofence_inside_and_outside():
+    from executive.geofence import inside
+
+    square = ((-118.0, 33.0), (-117.0, 33.0), (-117.0, 34.0), (-118.0, 34.0))
+    assert inside(-117.5, 33.5, square) and not inside(-116.9, 33.5, square) and not inside(-117.5, 34.1, square)
+    notch = ((0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (2.0, 1.0), (0.0, 4.0))  # concave: the notch is outside
+    assert inside(1.0, 0.5, notch) and not inside(2.0, 3.0, notch) and inside(0.5, 3.0, notch)
