@@ -21,8 +21,16 @@ from planner.table import PolicyTable
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     ex = sub.add_parser("exec", help="run the onboard executive against a vehicle over MAVLink")
-    ex.add_argument("--table", type=Path, required=True, help="policy table (.lrpt) from `lrauv plan`")
-    ex.add_argument("--mission", type=Path, help="mission YAML: vehicle figures, on_arrival and safety limits")
+    ex.add_argument("--table", type=Path, action="append", required=True,
+                    help="policy table (.lrpt) from `lrauv plan`; repeat for the goals of a multi-goal mission")
+    ex.add_argument("--mission", type=Path,
+                    help="mission YAML: goals, vehicle figures, safety limits; enables onboard replanning")
+    ex.add_argument("--gcs", metavar="ADDRESS",
+                    help="pymavlink address to hear a ground station on, for uploads (e.g. udpin:0.0.0.0:14551)")
+    ex.add_argument("--watch", type=Path, metavar="DIR",
+                    help="replan when a new forecast (*.nc) appears here (default: the mission's forecast.directory)")
+    ex.add_argument("--work-dir", type=Path, help="uploaded forecasts and onboard plans (default: beside the log)")
+    ex.add_argument("--replan-period-h", type=float, help="also replan this often on the latest forecast")
     ex.add_argument("--link", default="udpout:127.0.0.1:14560",
                     help="pymavlink address of the autopilot (default udpout:127.0.0.1:14560; ArduSub SITL: tcp:127.0.0.1:5760)")
     ex.add_argument("--log", type=Path, help="MCAP log to write (default out/exec-<UTC time>.mcap)")
@@ -58,13 +66,29 @@ def run(args: argparse.Namespace) -> int:
 def _exec(args: argparse.Namespace) -> int:
     from executive.loop import ExecConfig, Executive
 
-    data = _read(args.table)
-    table = PolicyTable.from_bytes(data, name=str(args.table))
+    from executive import plans
+
+    blobs = [_read(p) for p in args.table]
+    tables = [PolicyTable.from_bytes(data, name=str(p)) for p, data in zip(args.table, blobs)]
     helm = HelmConfig()
+    watch, period_s, replan_on_new = args.watch, None, True
     if args.mission is not None:
-        helm = _helm_config(args.mission, table)
-    if args.on_arrival:
-        helm = replace(helm, on_arrival=args.on_arrival)
+        helm, plan, mission = _mission_setup(args.mission, args.table, tables, args.on_arrival)
+        if watch is None and mission.forecast.directory is not None:
+            watch = mission.forecast.directory
+        period_s, replan_on_new = mission.replanning.period_s, mission.replanning.on_new_forecast
+    else:
+        if len(tables) > 1:
+            raise PlannerError("--table: several tables need a --mission to say the order of their goals")
+        if args.on_arrival:
+            helm = replace(helm, on_arrival=args.on_arrival)
+        plan = plans.single(tables[0], on_arrival=helm.on_arrival)
+    if args.replan_period_h is not None:
+        if not (math.isfinite(args.replan_period_h) and args.replan_period_h > 0):
+            raise PlannerError(f"--replan-period-h: expected a positive number of hours; got {args.replan_period_h}")
+        period_s = args.replan_period_h * 3600.0
+    if watch is not None and not watch.is_dir():
+        raise PlannerError(f"--watch {watch}: not a directory")
     if not (math.isfinite(args.telemetry_hz) and 0.1 <= args.telemetry_hz <= 50):
         raise PlannerError(f"--telemetry-hz: expected 0.1 to 50 Hz; got {args.telemetry_hz}")
     fast = {"GLOBAL_POSITION_INT", "ATTITUDE"}
@@ -79,19 +103,25 @@ def _exec(args: argparse.Namespace) -> int:
     config = ExecConfig(
         link=args.link, log_path=log_path, helm=helm, exit_on_arrival=args.exit_on_arrival, linger_s=args.linger_s,
         max_wall_s=args.max_wall_s, max_vehicle_s=None if args.max_vehicle_h is None else args.max_vehicle_h * 3600.0,
+        gcs_link=args.gcs, mission_path=args.mission, watch_dir=watch, work_dir=args.work_dir,
+        replan_on_new_forecast=replan_on_new, replan_period_s=period_s,
     )
-    meta = {"executive": {"table": str(args.table), "table_crc32": f"{table.crc32:08x}", "link": args.link,
-                          "mission": str(args.mission or ""), "forecast_identity": table.forecast_identity,
-                          "forecast_time": table.forecast_time or ""}}
+    table = plan.table
+    assert table is not None
+    meta = {"executive": {"table": ",".join(str(p) for p in args.table), "table_crc32": f"{table.crc32:08x}",
+                          "link": args.link, "gcs": args.gcs or "", "mission": str(args.mission or ""),
+                          "forecast_identity": table.forecast_identity, "forecast_time": table.forecast_time or ""}}
     try:
-        executive = Executive(config, table, table_bytes=data, metadata=meta)
+        executive = Executive(config, plan, table_bytes=blobs[tables.index(table)], metadata=meta)
     except OSError as exc:
-        raise PlannerError(f"--link {args.link}: cannot open: {exc}") from None
+        raise PlannerError(f"--link {args.link} or --gcs {args.gcs}: cannot open: {exc}") from None
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     if not args.quiet:
-        print(f"lrauv exec: table {args.table} (crc {table.crc32:08x}), link {args.link}, log {log_path}", flush=True)
+        gcs = f", ground station on {args.gcs}" if args.gcs else ""
+        print(f"lrauv exec: {len(plan.goals)} goal(s), table crc {table.crc32:08x}, link {args.link}{gcs}, log {log_path}",
+              flush=True)
     s = executive.run(stop)
     if not args.quiet:
         energy = "unknown" if s.energy_used_wh is None else f"{s.energy_used_wh:.1f} Wh"
@@ -103,6 +133,9 @@ def _exec(args: argparse.Namespace) -> int:
         if s.decision_median_us is not None:
             print(f"latency    decision median {s.decision_median_us:.0f} us, p99 {s.decision_p99_us:.0f} us"
                   f" (with MCAP writes p99 {s.message_p99_us:.0f} us)")
+        if executive.swaps:
+            print(f"plans      {len(executive.swaps)} swapped in: "
+                  + "; ".join(f"{w.get('source')} -> goal {w['goal_index']} table {w['table_crc32']}" for w in executive.swaps))
         print(f"log        {s.log_path}", flush=True)
     return 0 if s.reached or not args.exit_on_arrival else 1
 
@@ -114,21 +147,30 @@ def _read(path: Path) -> bytes:
         raise PlannerError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
 
 
-def _helm_config(mission_path: Path, table: PolicyTable) -> HelmConfig:
-    """The helm's figures from a mission whose first goal is the table's goal."""
+def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTable], on_arrival: str | None):  # type: ignore[no-untyped-def]
+    """The helm's figures and the goal list from the mission; each table must serve one of its goals."""
+    from executive import plans
     from planner.mission import load_mission
 
     m = load_mission(mission_path)
-    first = m.goals[0]
-    goal = first.goal
-    if (abs(goal.lat_deg - table.goal_lat_deg) > 1e-6 or abs(goal.lon_deg - table.goal_lon_deg) > 1e-6
-            or abs(goal.depth_m - table.goal_depth_m) > 1e-6):
-        raise PlannerError(
-            f"{mission_path}: goals[0] ({goal.lon_deg:g}, {goal.lat_deg:g}, {goal.depth_m:g} m) does not match the table's goal"
-            f" ({table.goal_lon_deg:g}, {table.goal_lat_deg:g}, {table.goal_depth_m:g} m): plan the table for this mission")
+    goals = m.goals
+    if on_arrival:
+        goals = tuple(replace(g, on_arrival=on_arrival) for g in goals)  # type: ignore[arg-type]
+    plan = plans.MissionPlan(goals=goals, tables=(None,) * len(goals))
+    for path, table in zip(paths, tables):
+        verdict = plans.check_table(table, plan)
+        if not verdict.accepted:
+            raise PlannerError(f"{path}: {verdict.reason} in {mission_path}: plan the table for this mission")
+        assert verdict.goal_index is not None
+        plan = plans.with_table(plan, verdict.goal_index, table)
+    if plan.table is None:
+        first = goals[0].goal
+        raise PlannerError(f"--table: none is for goals[0] of {mission_path} ({first.lon_deg:g}, {first.lat_deg:g},"
+                           f" {first.depth_m:g} m): plan it with `lrauv plan {mission_path}`")
     v, s = m.vehicle, m.safety
-    return HelmConfig(
+    helm = HelmConfig(
         cruise_speed_m_s=v.cruise_speed_m_s, yaw_rate_deg_s=v.yaw_rate_deg_s, glide_rate_m_s=v.glide_rate_m_s,
-        on_arrival=first.on_arrival, link_loss_timeout_s=s.link_loss_timeout_s, max_mission_time_s=s.max_mission_time_s,
-        min_battery_pct=s.min_battery_pct, max_depth_m=s.max_depth_m,
+        on_arrival=goals[0].on_arrival, link_loss_timeout_s=s.link_loss_timeout_s, max_mission_time_s=s.max_mission_time_s,
+        min_battery_pct=s.min_battery_pct, max_depth_m=s.max_depth_m, geofence=s.geofence, on_breach=s.on_breach,
     )
+    return helm, plan, m

@@ -6,6 +6,12 @@ returns are encoded by the bridge and sent, and everything (telemetry, state,
 decisions, commands, events, raw MAVLink both ways) goes to the MCAP log.
 Timing is vehicle time (``executive.clock``), so the loop is the same at any
 simulator speedup.
+
+Uploads (issue 3) arrive on the ground-station link (``gcs_link``) or through the
+autopilot: goals by the mission protocol (``executive.mission_protocol``), tables and
+forecasts by MAVLink FTP (``executive.ftp``). New tables, uploaded or planned onboard
+(``executive.replanner``), are checked (``executive.plans``) and swapped in whole just
+before a decision; a refused one is logged and never replaces the running plan.
 """
 
 from __future__ import annotations
@@ -17,17 +23,23 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
+from executive import plans
 from executive.clock import VehicleClock
 from executive.helm import Decision, HelmConfig, HelmState, step
 from executive.latency import LatencyHistogram
+from executive.plans import MissionPlan
 from executive.recorder import Recorder, Topic
+from executive.replanner import ForecastWatcher, PlanJob, PlanResult, Replanner
 from executive.state import Command, Event, Phase, VehicleState
+from executive.uploads import Uploads
+from planner.errors import PlannerError
 from planner.table import PolicyTable
 
 _POLL_S = 0.05  # longest wait in select (wall); heartbeats and link checks run at least this often
 _DRAIN_BUDGET_S = 0.01  # longest burst of input handling (wall) before time-driven work gets its turn
 _HEARTBEAT_PERIOD_S = 1.0  # vehicle time (section 2.1: 1 Hz)
 _STATE_FIELDS = tuple(f.name for f in fields(VehicleState))
+_WATCH_PERIOD_S = 1.0  # wall seconds between looks at the watched forecast directory
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,6 +52,12 @@ class ExecConfig:
     max_wall_s: float | None = None
     max_vehicle_s: float | None = None
     autopilot_system: int = bridge.AUTOPILOT_SYSTEM
+    gcs_link: str | None = None  # pymavlink address for the ground station (uploads), e.g. udpin:0.0.0.0:14551
+    mission_path: Path | None = None  # the mission YAML: needed to plan onboard
+    watch_dir: Path | None = None  # new forecast files here trigger a replan
+    work_dir: Path | None = None  # uploaded forecasts and onboard plans (default: beside the log)
+    replan_on_new_forecast: bool = True
+    replan_period_s: float | None = None  # vehicle seconds between replans on the latest forecast
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,15 +85,23 @@ class RunSummary:
 class Executive:
     """Runs the helm against a live MAVLink link until told to stop or the mission ends."""
 
-    def __init__(self, config: ExecConfig, table: PolicyTable | None, *, table_bytes: bytes | None = None,
+    def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *, table_bytes: bytes | None = None,
                  metadata: dict[str, dict[str, str]] | None = None) -> None:
         from pymavlink import mavutil  # transport only; encoding and parsing are the bridge's
 
         self.config = config
-        self.table = table
+        if isinstance(table, PolicyTable):
+            table = plans.single(table, on_arrival=config.helm.on_arrival)
+        self.plan: MissionPlan | None = table
+        self.helm_config = self._config_for(self.plan)
         self.conn = mavutil.mavlink_connection(config.link, source_system=bridge.EXECUTIVE_SYSTEM,
                                                source_component=bridge.EXECUTIVE_COMPONENT)
         self.mav = bridge.new_mav(self.conn)
+        self.gcs = None
+        if config.gcs_link is not None:
+            self.gcs = mavutil.mavlink_connection(config.gcs_link, source_system=bridge.EXECUTIVE_SYSTEM,
+                                                  source_component=bridge.EXECUTIVE_COMPONENT)
+            self.gcs_mav = bridge.new_mav(self.gcs)
         self.clock = VehicleClock()
         self.vehicle = VehicleState()
         self.helm = HelmState()
@@ -90,10 +116,38 @@ class Executive:
         self._later: list[tuple[Any, tuple[Any, ...], dict[str, Any]]] = []
         self.decision_latency = LatencyHistogram()  # datagram read -> commands sent
         self.message_cost = LatencyHistogram()  # datagram read -> everything logged
-        if table is not None:
-            self._record_policy(table, table_bytes, "loaded")
+        # Plan changes: the next plan waits here for a decision boundary.
+        self._pending: tuple[MissionPlan, dict[str, Any]] | None = None
+        self.staged: MissionPlan | None = None  # uploaded goals still waiting for their first table
+        self.swaps: list[dict[str, Any]] = []  # every swap's log record, for the summary and tests
+        self._unix_offset_s: float | None = None  # SYSTEM_TIME: unix time = vehicle time + offset
+        self._work_dir = config.work_dir or config.log_path.with_name(config.log_path.stem + "-work")
+        self.uploads = Uploads(accept_goals=self._accept_goals, accept_file=self._accept_file,
+                               refused=lambda what, why: self._refuse(self.clock.now_s(time.monotonic()), what, why,
+                                                                      notify=False))
+        self.replanner = Replanner(config.mission_path, self._work_dir) if config.mission_path is not None else None
+        self.watcher = ForecastWatcher(config.watch_dir) if config.watch_dir is not None else None
+        self._next_watch_wall = 0.0
+        self._latest_forecast: Path | None = None
+        self._last_plan_s: float | None = None
+        self._asked_next: int | None = None
+        if self.plan is not None and self.plan.table is not None:
+            for table_n in self.plan.tables:
+                if table_n is not None:
+                    self._record_policy(table_n, table_bytes if table_n is self.plan.table else None, "loaded")
         else:
             self._event(0.0, Event("error", "no policy table: the vehicle will be surfaced"))
+
+    @property
+    def table(self) -> PolicyTable | None:
+        """The table in use: the active goal's."""
+        return None if self.plan is None else self.plan.table
+
+    def _config_for(self, plan: MissionPlan | None) -> HelmConfig:
+        goal = None if plan is None else plan.goal
+        if goal is None:
+            return self.config.helm
+        return replace(self.config.helm, on_arrival=goal.on_arrival)
 
     # -- public ------------------------------------------------------------------------
 
@@ -101,6 +155,7 @@ class Executive:
         """Loop until ``stop.is_set()``, arrival (when configured) or a time limit."""
         wall0 = time.monotonic()
         fd = self.conn.fd
+        fds = [fd] if self.gcs is None else [fd, self.gcs.fd]
         try:
             self._heartbeat(wall0)
             while self._stop_reason is None:
@@ -109,9 +164,11 @@ class Executive:
                     break
                 wall = time.monotonic()
                 wait = min(_POLL_S, self._wall_to_heartbeat(wall))
-                ready, _, _ = select.select([fd], [], [], wait)
-                if ready:
+                ready, _, _ = select.select(fds, [], [], wait)
+                if fd in ready:
                     self._drain(time.monotonic())
+                if self.gcs is not None and self.gcs.fd in ready:
+                    self._drain_gcs()
                 self._housekeeping(time.monotonic(), wall0)
         finally:
             summary = self._summary(time.monotonic() - wall0)
@@ -119,9 +176,13 @@ class Executive:
         return summary
 
     def close(self) -> None:
+        if self.replanner is not None:
+            self.replanner.close()
         self._write_later()
         self.recorder.close()
         self.conn.close()
+        if self.gcs is not None:
+            self.gcs.close()
 
     # -- input -------------------------------------------------------------------------
 
@@ -149,6 +210,33 @@ class Executive:
                     self.message_cost.add(time.perf_counter() - t0)
             if wall >= deadline:
                 return
+
+    def _drain_gcs(self) -> None:
+        """Ground-station traffic: uploads only, never a decision; bounded like ``_drain``."""
+        assert self.gcs is not None
+        deadline = time.monotonic() + _DRAIN_BUDGET_S
+        while time.monotonic() < deadline:
+            data = self.gcs.recv()
+            if not data:
+                break
+            try:
+                msgs = self.gcs_mav.parse_buffer(bytes(data)) or []
+            except Exception:  # as in _drain: a malformed frame is counted, never raised
+                self._counts["bad"] += 1
+                continue
+            now_s = self.clock.now_s(time.monotonic())
+            for msg in msgs:
+                if msg.get_type() == "BAD_DATA":
+                    self._counts["bad"] += 1
+                    continue
+                self._counts["in"] += 1
+                self._log(self._record_rx, now_s, msg)
+                self._upload_message(msg, self.gcs_mav, now_s)
+        self._write_later()
+
+    def _upload_message(self, msg: Any, mav: Any, now_s: float) -> None:
+        for reply in self.uploads.handle(msg, mav, time.monotonic()):
+            self._send_on(mav, now_s, reply)
 
     def _log(self, fn: Any, *args: Any, **kwargs: Any) -> None:
         self._later.append((fn, args, kwargs))
@@ -180,6 +268,8 @@ class Executive:
         now_s = self.clock.now_s(wall)
         self._log(self._record_rx, now_s, msg)
         if not mine:
+            if kind in Uploads.MESSAGES:  # a ground station routed through the autopilot
+                self._upload_message(msg, self.mav, now_s)
             return False
         if t_boot is not None:
             if t_boot < self._last_time.get(kind, -1.0):
@@ -187,6 +277,8 @@ class Executive:
                 return False
             self._last_time[kind] = t_boot
         self.vehicle = bridge.apply(self.vehicle, msg, now_s)
+        if kind == "SYSTEM_TIME" and msg.time_unix_usec > 0:
+            self._unix_offset_s = msg.time_unix_usec / 1e6 - msg.time_boot_ms / 1000.0
         if kind in ("COMMAND_ACK", "STATUSTEXT"):
             level = "info" if kind == "STATUSTEXT" and msg.severity > 4 else "warning"
             if kind == "COMMAND_ACK" and msg.result == 0:
@@ -205,7 +297,9 @@ class Executive:
     # -- decisions and output ---------------------------------------------------------------
 
     def _tick(self, now_s: float, *, link_ok: bool) -> None:
-        tick = step(self.helm, self.vehicle, self.table, self.config.helm, now_s=now_s, link_ok=link_ok)
+        if self._pending is not None:
+            self._swap(now_s)  # the decision boundary: a new plan is used whole, from this decision on
+        tick = step(self.helm, self.vehicle, self.table, self.helm_config, now_s=now_s, link_ok=link_ok)
         self.helm = tick.helm
         for event in tick.events:
             self._event(now_s, event)
@@ -214,8 +308,187 @@ class Executive:
         if tick.decision is not None:
             self._counts["decisions"] += 1
             self._log(self.recorder.write, Topic.DECISION, now_s, _decision_payload(tick.decision))
-        if self.helm.phase is Phase.ARRIVED and self._arrival_s is None:
+        if self.helm.phase is Phase.ARRIVED:
+            self._arrived(now_s)
+
+    def _arrived(self, now_s: float) -> None:
+        """At the active goal: go on to the next one (``on_arrival: next``) or end the mission."""
+        plan = self.plan
+        assert plan is not None
+        if plan.goal is not None and plan.goal.on_arrival == "next" and plan.has_next:
+            nxt = plan.index + 1
+            if plan.tables[nxt] is not None:
+                self._event(now_s, Event("info", f"goal {plan.index} reached: on to goal {nxt}"))
+                self._propose(replace(plan, index=nxt), {"source": "next goal"})
+                self._swap(now_s)
+            elif self._asked_next != nxt:
+                self._asked_next = nxt
+                if self.replanner is not None:
+                    self._event(now_s, Event("info", f"goal {plan.index} reached: planning goal {nxt} onboard, holding"))
+                    self._request_plan(now_s, nxt, plan.goals[nxt], reason="next goal")
+                else:
+                    self._event(now_s, Event("error", f"goal {plan.index} reached but goal {nxt} has no table"
+                                                      " and no onboard planner: holding"))
+            return
+        if self._arrival_s is None:
             self._arrival_s = now_s
+
+    # -- plan changes ---------------------------------------------------------------------
+
+    def _propose(self, plan: MissionPlan, note: dict[str, Any]) -> None:
+        """Queue ``plan`` to replace the running one at the next decision."""
+        self._pending = (plan, note)
+
+    def _base(self) -> MissionPlan | None:
+        return self._pending[0] if self._pending is not None else self.plan
+
+    def _swap(self, now_s: float) -> None:
+        assert self._pending is not None
+        new, note = self._pending
+        self._pending = None
+        old, old_table = self.plan, self.table
+        self.plan = new
+        self.helm_config = self._config_for(new)
+        if new.table is not old_table:
+            phase = Phase.RUNNING if self.helm.phase is Phase.ARRIVED else self.helm.phase
+            self.helm = replace(self.helm, phase=phase, activity=None, target_sent_s=None, mode_request_s=None)
+        if old is None or new.goals != old.goals:
+            self._arrival_s, self._asked_next = None, None  # a new mission
+        record = {"time_s": now_s, "reason": "swapped", **note, "goal_index": new.index,
+                  "previous": plans.identity(old_table), **plans.identity(new.table)}
+        if new.table is not None:
+            record["forecast"] = {"identity": new.table.forecast_identity, "time": new.table.forecast_time}
+        self.swaps.append(record)
+        self._log(self.recorder.write, Topic.POLICY, now_s, record)
+        prev = record["previous"]["table_crc32"]
+        self._event(now_s, Event("info", f"plan swapped ({note.get('source', '?')}): goal {new.index},"
+                                         f" table {prev} -> {record['table_crc32']}"))
+
+    def _refuse(self, now_s: float, what: str, reason: str, table: PolicyTable | None = None, *,
+                notify: bool = True) -> str:
+        record: dict[str, Any] = {"time_s": now_s, "reason": "refused", "refusal": f"{what}: {reason}",
+                                  **plans.identity(table)}
+        if record["table_crc32"] is None:
+            record["table_crc32"] = "00000000"
+        self._log(self.recorder.write, Topic.POLICY, now_s, record)
+        event = Event("warning", f"refused {what}: {reason}; the running plan goes on")
+        if notify:
+            self._event(now_s, event)
+        else:  # the protocol has told the ground station itself
+            self._log(self.recorder.log, now_s, event.level, event.text)
+        return reason
+
+    def _accept_goals(self, goals: tuple[Any, ...]) -> str | None:
+        """Goals uploaded by the mission protocol: staged until the first goal has a table."""
+        now_s = self.clock.now_s(time.monotonic())
+        if not goals:
+            return self._refuse(now_s, "mission", "no goals")
+        base = self._base() or MissionPlan(goals=(), tables=())
+        staged = plans.adopt(tuple(goals), base)
+        self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted"))
+        if staged.table is not None:
+            self.staged = None
+            self._propose(staged, {"source": "uploaded mission"})
+        else:
+            self.staged = staged
+            if self.replanner is not None:
+                self._request_plan(now_s, 0, staged.goals[0], reason="uploaded mission")
+            else:
+                self._event(now_s, Event("info", "waiting for the table of goal 0 (MAVLink FTP /tables/)"))
+        return None
+
+    def _accept_file(self, path: str, data: bytes) -> str | None:
+        """A file uploaded by MAVLink FTP: a table (``*.lrpt``) or a forecast (``*.nc``)."""
+        now_s = self.clock.now_s(time.monotonic())
+        name = path.rsplit("/", 1)[-1]
+        if name.endswith(".nc"):
+            return self._accept_forecast(now_s, name, data)
+        if not name.endswith(".lrpt"):
+            return self._refuse(now_s, path, "expected a policy table (*.lrpt) or a forecast (*.nc)")
+        try:
+            table = PolicyTable.from_bytes(data, name=path)  # CRC, version and shape
+        except PlannerError as exc:
+            return self._refuse(now_s, path, str(exc))
+        return self._offer(now_s, table, data, {"source": f"upload {path}"})
+
+    def _offer(self, now_s: float, table: PolicyTable, data: bytes | None, note: dict[str, Any]) -> str | None:
+        """Check a new table against the staged mission, then the running one; queue it if it fits."""
+        what = f"table {table.crc32:08x}"
+        candidates = []
+        if self.staged is not None:
+            candidates.append(("staged", self.staged))
+        base = self._base()
+        if base is not None:
+            candidates.append(("running", base))
+        reasons = []
+        for which, plan in candidates:
+            verdict = plans.check_table(table, plan)
+            if not verdict.accepted:
+                reasons.append(verdict.reason)
+                continue
+            assert verdict.goal_index is not None
+            new = plans.with_table(plan, verdict.goal_index, table)
+            self._record_policy(table, data, "received", now_s=now_s)
+            if which == "staged":
+                if new.table is None:
+                    self.staged = new
+                    return None
+                self.staged = None
+                self._propose(new, {**note, "mission": "uploaded"})
+            else:
+                self._propose(new, note)
+            return None
+        if not candidates:
+            reasons.append("there is no mission to match it against")
+        return self._refuse(now_s, what, "; ".join(r for r in reasons if r), table)
+
+    def _accept_forecast(self, now_s: float, name: str, data: bytes) -> str | None:
+        if self.replanner is None:
+            return self._refuse(now_s, name, "this executive has no mission to plan onboard (lrauv exec --mission)")
+        from planner.atomic import atomic_target
+
+        folder = self._work_dir / "forecasts"
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / name
+        with atomic_target(path) as tmp:
+            tmp.write_bytes(data)
+        self._new_forecast(now_s, path, time.monotonic())
+        return None
+
+    def _new_forecast(self, now_s: float, path: Path, seen_wall: float) -> None:
+        self._latest_forecast = path
+        plan = self._base()
+        self._event(now_s, Event("info", f"new forecast {path.name}"))
+        if self.replanner is None or not self.config.replan_on_new_forecast or plan is None or plan.goal is None:
+            return
+        self._request_plan(now_s, plan.index, plan.goal, reason=f"new forecast {path.name}",
+                           seen_wall=seen_wall)
+
+    def _request_plan(self, now_s: float, index: int, goal: Any, *, reason: str,
+                      seen_wall: float | None = None) -> None:
+        assert self.replanner is not None
+        when = None
+        if self._unix_offset_s is not None:
+            when = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(now_s + self._unix_offset_s))
+        job = PlanJob(goal_index=index, goal=goal, forecast=self._latest_forecast, time_iso=when, reason=reason,
+                      requested_wall_s=seen_wall if seen_wall is not None else time.monotonic())
+        self.replanner.request(job)
+        self._last_plan_s = now_s
+        self._log(self.recorder.log, now_s, "info", f"planning goal {index} onboard ({reason})")
+
+    def _replan_done(self, now_s: float, result: PlanResult) -> None:
+        job = result.job
+        if result.error is not None or result.table_bytes is None:
+            self._refuse(now_s, f"onboard plan ({job.reason})", result.error or "no table")
+            return
+        try:
+            table = PolicyTable.from_bytes(result.table_bytes, name="onboard plan")
+        except PlannerError as exc:
+            self._refuse(now_s, f"onboard plan ({job.reason})", str(exc))
+            return
+        note = {"source": f"onboard plan ({job.reason})", "latency_s": round(result.latency_s, 3),
+                "plan_s": round(result.finished_wall_s - result.started_wall_s, 3)}
+        self._offer(now_s, table, result.table_bytes, note)
 
     def _send_command(self, now_s: float, cmd: Command) -> None:
         msg = bridge.encode(self.mav, cmd, time_boot_ms=int(now_s * 1000) & 0xFFFFFFFF,
@@ -232,6 +505,11 @@ class Executive:
         self._counts["out"] += 1
         self._log(self._record_tx, now_s, msg)
 
+    def _send_on(self, mav: Any, now_s: float, msg: Any) -> None:
+        mav.send(msg)
+        self._counts["out"] += 1
+        self._log(self._record_tx, now_s, msg)
+
     def _record_tx(self, now_s: float, msg: Any) -> None:
         self.recorder.write(Topic.MAVLINK_TX, now_s, bridge.describe(msg))
 
@@ -239,16 +517,18 @@ class Executive:
         self._log(self.recorder.log, now_s, event.level, event.text)
         if event.level in ("warning", "error"):
             self._send(now_s, bridge.statustext(self.mav, event))
+            if self.gcs is not None:
+                self._send_on(self.gcs_mav, now_s, bridge.statustext(self.gcs_mav, event))
 
     def _record_state(self, now_s: float, v: VehicleState) -> None:
         if v.has_position:
             self.recorder.location_fix(now_s, lat_deg=v.lat_deg, lon_deg=v.lon_deg, depth_m=v.depth_m)  # type: ignore[arg-type]
         self.recorder.write(Topic.STATE, now_s, {name: getattr(v, name) for name in _STATE_FIELDS})
 
-    def _record_policy(self, table: PolicyTable, table_bytes: bytes | None, reason: str) -> None:
+    def _record_policy(self, table: PolicyTable, table_bytes: bytes | None, reason: str, *, now_s: float = 0.0) -> None:
         header = table.header()
-        self.recorder.write(Topic.POLICY, 0.0, {
-            "time_s": 0.0, "reason": reason, "table_crc32": f"{table.crc32:08x}",
+        self.recorder.write(Topic.POLICY, now_s, {
+            "time_s": now_s, "reason": reason, "table_crc32": f"{table.crc32:08x}",
             "forecast": header.get("forecast", {}), "grid": header.get("grid", {}), "goal": header.get("goal", {}),
             "model": header.get("model"), "criterion": header.get("criterion"),
         })
@@ -266,6 +546,8 @@ class Executive:
         now_s = self.clock.now_s(wall)
         healthy = self.helm.phase not in (Phase.SAFE, Phase.LINK_LOST)
         self._send(now_s, bridge.heartbeat(self.mav, healthy=healthy))
+        if self.gcs is not None:
+            self._send_on(self.gcs_mav, now_s, bridge.heartbeat(self.gcs_mav, healthy=healthy))
         self._next_heartbeat_s = now_s + _HEARTBEAT_PERIOD_S
         self._next_heartbeat_wall = wall + _HEARTBEAT_PERIOD_S
 
@@ -276,6 +558,9 @@ class Executive:
         hb = self.vehicle.heartbeat_s
         if hb is not None and now_s - hb > self.config.helm.link_loss_timeout_s:
             self._tick(now_s, link_ok=False)
+        for mav, msg in self.uploads.tick(wall):  # mission protocol retries
+            self._send_on(mav, now_s, msg)
+        self._replanning(now_s, wall)
         self._write_later()
         self.recorder.maybe_flush()
         cfg = self.config
@@ -285,6 +570,25 @@ class Executive:
             self._stop_reason = "vehicle time limit"
         elif cfg.max_wall_s is not None and wall - wall0 >= cfg.max_wall_s:
             self._stop_reason = "wall time limit"
+
+    def _replanning(self, now_s: float, wall: float) -> None:
+        if self.watcher is not None and wall >= self._next_watch_wall:
+            self._next_watch_wall = wall + _WATCH_PERIOD_S
+            for path in self.watcher.poll():
+                self._new_forecast(now_s, path, wall)
+        if self.replanner is None:
+            return
+        result = self.replanner.poll()
+        if result is not None:
+            self._replan_done(now_s, result)
+        period = self.config.replan_period_s
+        plan = self._base()
+        if (period is not None and plan is not None and plan.goal is not None and self.helm.phase is Phase.RUNNING
+                and not self.replanner.busy and (self._last_plan_s is None or now_s - self._last_plan_s >= period)):
+            if self._last_plan_s is None:
+                self._last_plan_s = now_s  # the period counts from the start
+            else:
+                self._request_plan(now_s, plan.index, plan.goal, reason="period")
 
     def _summary(self, wall_s: float) -> RunSummary:
         start = self.helm.mission_start_s

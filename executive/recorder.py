@@ -171,9 +171,17 @@ _COMMAND = _lrauv("lrauv.Command", "A command the helm sent; the remaining keys 
 
 _POLICY = _lrauv("lrauv.Policy", "A policy table the executive loaded, swapped in or refused", {
     "time_s": _NUM,
-    "reason": {"type": "string", "enum": ["loaded", "swapped", "refused"]},
+    "reason": {"type": "string", "enum": ["loaded", "received", "swapped", "refused"]},
     "table_crc32": {"type": "string", "pattern": "^[0-9a-f]{8}$"},
 }, {
+    "source": _STR,  # what brought the table: upload PATH, onboard plan (REASON), next goal
+    "goal_index": _INT,
+    "previous": _OBJ,  # the replaced table's table_crc32, forecast_identity, forecast_time
+    "forecast_identity": _STR_OR_NULL,
+    "forecast_time": _STR_OR_NULL,
+    "latency_s": _NUM,  # onboard plans: from the trigger (a new forecast seen) to the table ready
+    "plan_s": _NUM,  # onboard plans: the planner process alone
+    "refusal": _STR,
     "forecast": {"type": "object", "properties": {"identity": _STR, "time": _STR_OR_NULL}},
     "grid": _OBJ,
     "goal": _OBJ,

@@ -89,9 +89,14 @@ def build_parser() -> argparse.ArgumentParser:
     from vehicle_sim.cli import add_parser as add_sim
     from vehicle_sim.demo import add_parser as add_demo
 
+    from planner.upload import add_parser as add_upload
+    from planner.waypoints_cli import add_parser as add_waypoints
+
     add_executive(sub)
     add_sim(sub)
     add_demo(sub)
+    add_upload(sub)
+    add_waypoints(sub)
     return parser
 
 
@@ -115,6 +120,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             from vehicle_sim.demo import run as run_demo
 
             return run_demo(args)
+        if args.command == "upload":
+            from planner.upload import run as run_upload
+
+            return run_upload(args)
+        if args.command == "waypoints":
+            from planner.waypoints_cli import run as run_waypoints
+
+            return run_waypoints(args)
     except PlannerError as exc:
         print(f"lrauv: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -1,0 +1,433 @@
+"""MAVLink FTP server for policy-table uploads: a pure state machine, no sockets, no disk.
+
+Protocol: FILE_TRANSFER_PROTOCOL (message 110), https://mavlink.io/en/services/ftp.html
+(section names below are that page's). ``FtpServer.handle`` takes one request payload
+and returns the reply payload, or None when no reply is due (the payload is a reply
+itself). The caller owns the link: it answers the requester (sysid, compid) with
+``file_transfer_protocol_send(0, sysid, compid, reply)``.
+
+The file system is virtual and tiny: directories ``/`` and ``/tables`` (fixed), files
+only in them. A write session (CreateFile, OpenFileWO) collects bytes in memory; when
+it is closed (TerminateSession, or ResetSessions as PX4 and QGroundControl close an
+upload) the file goes to ``accept(path, data)``. None stores it in ``files`` (replacing
+an older file of that path) and the terminate is ACKed; a reason string discards it
+and the terminate is NAKed with Fail (the reason is logged; FTP has no field for it).
+``accept`` must judge the content itself (a policy table's own checks): a GCS that
+aborts an upload with ResetSessions ("Uploading a File": on a NAK the GCS "should
+cancel ... by sending ResetSessions") hands it a partial file. Sessions with a refused
+write are poisoned instead: closing them discards the data without calling ``accept``.
+
+What a client learns of a refusal depends on the client:
+
+* ``planner.ftp_client.put_file`` raises ``FtpUploadError`` ("refused by the vehicle").
+* pymavlink's ``MAVFTP.cmd_put`` (2.4.50) does not notice. After the last WriteFile
+  ACK it calls its progress/put callback with the full length ("Put N bytes" is
+  logged), then sends TerminateSession and waits for the reply with
+  ``process_ftp_reply("TerminateSession")``, which treats ACK and NAK alike ("Ack or
+  Nack ...: the handshake has been answered"). ``process_ftp_reply("put")`` then
+  returns the last WriteFile reply's result: ``FtpError.Success``. The spec allows
+  this ("Uploading a File": the terminate reply "may (generally speaking) be ignored
+  by the GCS"). A MAVFTP user learns of a refusal only by looking afterwards, e.g.
+  ``cmd_crc``/``cmd_list`` answer FileNotFound / do not list the file.
+
+Choices where the spec leaves room:
+
+* Retransmissions ("Timeouts/Resending": "the drone must re-send its response if a
+  request with the same sequence number is received"): the last replies are kept,
+  keyed by the whole request, and a repeated request gets the same reply without
+  being executed again. So a resent CreateFile gets the same session and a resent
+  TerminateSession the same verdict. A request evicted from that cache is executed
+  again: harmless for reads and writes; a TerminateSession then gets InvalidSession.
+* A CreateFile for the path of an open write session with nothing written yet answers
+  with that session; if data was written, the older session is dropped (an abandoned
+  upload) and a new one opened.
+* BurstReadFile answers one packet per request with ``burst_complete`` set (``handle``
+  returns one reply); clients ask again from the next offset.
+* CalcFileCRC32 is the CRC-32 of ArduPilot's ``crc_crc32(0, ...)`` and PX4's
+  ``crc32part(..., 0)``: the reflected 0xEDB88320 polynomial with initial value 0 and
+  no final XOR, i.e. ``zlib.crc32(data, 0xFFFFFFFF) ^ 0xFFFFFFFF`` (not ``zlib.crc32``).
+* CreateDirectory answers FileExists for ``/`` and ``/tables`` and FileProtected
+  otherwise; RemoveDirectory, TruncateFile and Rename are not supported
+  (UnknownCommand), so stored files change only through ``accept`` or RemoveFile.
+* Bounded memory: at most ``max_sessions`` open sessions (the oldest is dropped, without
+  ``accept``, to open another), files up to ``max_file_bytes`` (a WriteFile beyond
+  that is NAKed FailErrno EFBIG), at most ``max_files`` stored files (a new path beyond
+  that is NAKed FailErrno ENOSPC) and a bounded reply cache.
+
+Not thread-safe: call ``handle`` from one thread.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import struct
+import zlib
+from collections import OrderedDict
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from enum import IntEnum
+from types import MappingProxyType
+
+log = logging.getLogger(__name__)
+
+PAYLOAD_LEN = 251  # FILE_TRANSFER_PROTOCOL.payload
+MAX_DATA = 239  # "Payload Format": data[] after the 12-byte header
+# seq_number u16, session, opcode, size, req_opcode, burst_complete, padding, offset u32 (little endian)
+_HEADER = struct.Struct("<HBBBBBxI")
+DIRECTORIES = frozenset({"/", "/tables"})
+_CACHE_ENTRIES = 64
+
+
+class Opcode(IntEnum):
+    """"OpCodes/Command" and the two reply opcodes."""
+
+    NONE = 0
+    TERMINATE_SESSION = 1
+    RESET_SESSIONS = 2
+    LIST_DIRECTORY = 3
+    OPEN_FILE_RO = 4
+    READ_FILE = 5
+    CREATE_FILE = 6
+    WRITE_FILE = 7
+    REMOVE_FILE = 8
+    CREATE_DIRECTORY = 9
+    REMOVE_DIRECTORY = 10
+    OPEN_FILE_WO = 11
+    TRUNCATE_FILE = 12
+    RENAME = 13
+    CALC_FILE_CRC32 = 14
+    BURST_READ_FILE = 15
+    ACK = 128
+    NAK = 129
+
+
+class ErrorCode(IntEnum):
+    """"NAK Error Information": data[0] of a NAK (data[1] is an errno after FAIL_ERRNO)."""
+
+    NONE = 0
+    FAIL = 1
+    FAIL_ERRNO = 2
+    INVALID_DATA_SIZE = 3
+    INVALID_SESSION = 4
+    NO_SESSIONS_AVAILABLE = 5
+    EOF = 6
+    UNKNOWN_COMMAND = 7
+    FILE_EXISTS = 8
+    FILE_PROTECTED = 9
+    FILE_NOT_FOUND = 10
+
+
+def ftp_crc32(data: bytes) -> int:
+    """The CRC that CalcFileCRC32 returns (ArduPilot ``crc_crc32(0, data, len)``)."""
+    return zlib.crc32(data, 0xFFFFFFFF) ^ 0xFFFFFFFF
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One FTP payload ("Payload Format"); ``data`` holds ``size`` bytes when well formed."""
+
+    seq: int
+    session: int
+    opcode: int
+    size: int
+    req_opcode: int
+    burst_complete: int
+    offset: int
+    data: bytes
+
+    @classmethod
+    def parse(cls, payload: bytes) -> Frame:
+        """Zero-extended to 251 bytes (MAVLink 2 trims trailing zeros), extra bytes ignored."""
+        raw = payload[:PAYLOAD_LEN].ljust(PAYLOAD_LEN, b"\0")
+        seq, session, opcode, size, req_opcode, burst, offset = _HEADER.unpack_from(raw)
+        return cls(seq, session, opcode, size, req_opcode, burst, offset, raw[12:12 + min(size, MAX_DATA)])
+
+    def pack(self) -> bytes:
+        header = _HEADER.pack(self.seq, self.session, self.opcode, self.size, self.req_opcode, self.burst_complete,
+                              self.offset)
+        return (header + self.data).ljust(PAYLOAD_LEN, b"\0")
+
+
+class _Nak(Exception):
+    """Raised inside a handler to answer NAK; never leaves ``handle``."""
+
+    def __init__(self, code: ErrorCode, number: int = 0) -> None:
+        super().__init__(code.name)
+        self.code = code
+        self.number = number  # the errno sent in data[1] with FAIL_ERRNO
+
+
+@dataclass(frozen=True)
+class _Ack:
+    data: bytes = b""
+    session: int | None = None  # the allocated session (OpenFileRO, CreateFile, OpenFileWO); else echoed
+    burst_complete: int = 0
+
+
+@dataclass
+class _Session:
+    path: str
+    writable: bool
+    data: bytearray | bytes = field(default_factory=bytearray)
+    written: bool = False
+    poisoned: bool = False  # a write was refused: closing discards without accept
+
+
+class FtpServer:
+    """The FTP state machine; ``files`` is a read-only view of the accepted files."""
+
+    def __init__(self, *, accept: Callable[[str, bytes], str | None], max_file_bytes: int = 64 * 1024 * 1024,
+                 max_files: int = 64, max_sessions: int = 4) -> None:
+        self._accept = accept
+        self.max_file_bytes = max_file_bytes
+        self.max_files = max_files
+        self.max_sessions = max_sessions
+        self._files: dict[str, bytes] = {}
+        self._sessions: OrderedDict[int, _Session] = OrderedDict()  # oldest first
+        self._next_session = 0
+        self._replies: OrderedDict[bytes, bytes] = OrderedDict()  # request -> reply ("Timeouts/Resending")
+        self._handlers: dict[int, Callable[[Frame], _Ack]] = {
+            Opcode.NONE: lambda _req: _Ack(),  # "Ignored, always ACKed"
+            Opcode.TERMINATE_SESSION: self._terminate,
+            Opcode.RESET_SESSIONS: self._reset,
+            Opcode.LIST_DIRECTORY: self._list,
+            Opcode.OPEN_FILE_RO: self._open_ro,
+            Opcode.READ_FILE: self._read,
+            Opcode.CREATE_FILE: lambda req: self._open_write(req, truncate=True),
+            Opcode.WRITE_FILE: self._write,
+            Opcode.REMOVE_FILE: self._remove,
+            Opcode.CREATE_DIRECTORY: self._mkdir,
+            Opcode.OPEN_FILE_WO: lambda req: self._open_write(req, truncate=False),
+            Opcode.CALC_FILE_CRC32: self._crc,
+            Opcode.BURST_READ_FILE: self._burst,
+        }
+
+    @property
+    def files(self) -> Mapping[str, bytes]:
+        return MappingProxyType(self._files)
+
+    def handle(self, payload: bytes) -> bytes | None:
+        """The reply (251 bytes) to one request payload; None when the payload is a reply itself or not bytes."""
+        try:
+            raw = bytes(payload[:PAYLOAD_LEN]).ljust(PAYLOAD_LEN, b"\0")  # also a list of ints (msg.payload)
+        except Exception:  # not bytes at all
+            return None
+        req = Frame.parse(raw)
+        if req.opcode in (Opcode.ACK, Opcode.NAK):
+            return None  # never answer a reply (two servers would ping-pong)
+        cached = self._replies.get(raw)
+        if cached is not None:
+            self._replies.move_to_end(raw)
+            return cached
+        reply = self._execute(req).pack()
+        if req.opcode == Opcode.RESET_SESSIONS:
+            self._replies.clear()  # a new client: no earlier request is a retransmission of its own
+        else:
+            self._replies[raw] = reply
+            while len(self._replies) > _CACHE_ENTRIES:
+                self._replies.popitem(last=False)
+        return reply
+
+    # --- dispatch -----------------------------------------------------------------------------------
+
+    def _execute(self, req: Frame) -> Frame:
+        seq = (req.seq + 1) & 0xFFFF  # "Payload Format": replies carry the request's seq + 1
+        try:
+            if req.size > MAX_DATA:
+                raise _Nak(ErrorCode.INVALID_DATA_SIZE)
+            handler = self._handlers.get(req.opcode)
+            if handler is None:
+                raise _Nak(ErrorCode.UNKNOWN_COMMAND)
+            ack = handler(req)
+        except _Nak as nak:
+            data = bytes([nak.code, nak.number]) if nak.code == ErrorCode.FAIL_ERRNO else bytes([nak.code])
+            return Frame(seq, req.session, Opcode.NAK, len(data), req.opcode, 0, req.offset, data)
+        session = req.session if ack.session is None else ack.session
+        # the offset is echoed: MAVFTP finds the acknowledged WriteFile block by it
+        return Frame(seq, session, Opcode.ACK, len(ack.data), req.opcode, ack.burst_complete, req.offset, ack.data)
+
+    # --- sessions ("TerminateSession", "ResetSessions") -------------------------------------------------
+
+    def _terminate(self, req: Frame) -> _Ack:
+        session = self._sessions.pop(req.session, None)
+        if session is None:
+            raise _Nak(ErrorCode.INVALID_SESSION)
+        if session.writable and not self._finish(session):
+            raise _Nak(ErrorCode.FAIL)
+        return _Ack()
+
+    def _reset(self, _req: Frame) -> _Ack:
+        """Closes every session; uploads are finished as by TerminateSession, always ACKed."""
+        sessions, self._sessions = list(self._sessions.values()), OrderedDict()
+        for session in sessions:
+            if session.writable:
+                self._finish(session)
+        return _Ack()
+
+    def _finish(self, session: _Session) -> bool:
+        """Hands a closed upload to ``accept``; True when it was stored."""
+        if session.poisoned:
+            log.warning("FTP upload %s discarded: a write was refused", session.path)
+            return False
+        if session.path not in self._files and len(self._files) >= self.max_files:
+            log.warning("FTP upload %s discarded: already %d files", session.path, len(self._files))
+            return False
+        data = bytes(session.data)
+        try:
+            reason = self._accept(session.path, data)
+        except Exception as exc:  # the hook's bug must not take the server down
+            reason = f"accept raised {exc!r}"
+        if reason is not None:
+            log.warning("FTP upload %s (%d bytes) refused: %s", session.path, len(data), reason)
+            return False
+        self._files[session.path] = data
+        return True
+
+    def _open(self, session: _Session) -> int:
+        """Allocates a session id; drops the oldest session when all are taken."""
+        while len(self._sessions) >= self.max_sessions:
+            old_id, old = self._sessions.popitem(last=False)
+            log.warning("FTP session %d (%s) dropped for a new one", old_id, old.path)
+        sid = self._next_session
+        while sid in self._sessions:
+            sid = (sid + 1) & 0xFF
+        self._next_session = (sid + 1) & 0xFF
+        # cached replies of an earlier session with this id are no longer valid
+        for key in [k for k, v in self._replies.items() if k[2] == sid or v[2] == sid]:
+            del self._replies[key]
+        self._sessions[sid] = session
+        return sid
+
+    def _session(self, req: Frame, *, writable: bool) -> _Session:
+        session = self._sessions.get(req.session)
+        if session is None or session.writable != writable:
+            raise _Nak(ErrorCode.INVALID_SESSION)
+        return session
+
+    # --- files ---------------------------------------------------------------------------------------
+
+    def _open_ro(self, req: Frame) -> _Ack:
+        """"OpenFileRO": ACK carries the session and the file length (u32)."""
+        path = _path(req.data)
+        data = self._files.get(path)
+        if data is None:
+            raise _Nak(ErrorCode.FILE_NOT_FOUND)
+        sid = self._open(_Session(path, writable=False, data=data))
+        return _Ack(struct.pack("<I", len(data)), session=sid)
+
+    def _open_write(self, req: Frame, *, truncate: bool) -> _Ack:
+        """"CreateFile" (O_CREAT | O_TRUNC) and "OpenFileWO" (O_CREAT, keeps the content)."""
+        path = _file_path(req.data)
+        if path not in self._files and len(self._files) >= self.max_files:
+            raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
+        initial = b"" if truncate else self._files.get(path, b"")
+        for sid, open_session in list(self._sessions.items()):
+            if open_session.writable and open_session.path == path:
+                if not open_session.written:
+                    open_session.data = bytearray(initial)
+                    return _Ack(session=sid)  # a resent open whose reply was lost
+                del self._sessions[sid]  # an abandoned upload of the same path
+                log.warning("FTP session %d (%s) superseded by a new upload", sid, path)
+        sid = self._open(_Session(path, writable=True, data=bytearray(initial)))
+        return _Ack(session=sid)
+
+    def _write(self, req: Frame) -> _Ack:
+        """"WriteFile": any offset, gaps read as zeros; the ACK echoes the offset."""
+        session = self._session(req, writable=True)
+        end = req.offset + len(req.data)
+        if end > self.max_file_bytes:
+            session.poisoned = True
+            raise _Nak(ErrorCode.FAIL_ERRNO, errno.EFBIG)
+        buf = session.data
+        if not isinstance(buf, bytearray):  # unreachable: write sessions hold a bytearray
+            raise _Nak(ErrorCode.INVALID_SESSION)
+        if len(buf) < req.offset:
+            buf.extend(bytes(req.offset - len(buf)))
+        buf[req.offset:end] = req.data
+        session.written = True
+        return _Ack()
+
+    def _read(self, req: Frame) -> _Ack:
+        """"ReadFile": up to ``size`` bytes (0 asks for a full packet) from ``offset``."""
+        data = self._session(req, writable=False).data
+        if req.offset >= len(data):
+            raise _Nak(ErrorCode.EOF)
+        return _Ack(bytes(data[req.offset:req.offset + (req.size or MAX_DATA)]))
+
+    def _burst(self, req: Frame) -> _Ack:
+        """"BurstReadFile": one packet per request, ``burst_complete`` set."""
+        ack = self._read(req)
+        return _Ack(ack.data, burst_complete=1)
+
+    def _remove(self, req: Frame) -> _Ack:
+        path = _path(req.data)
+        if path in DIRECTORIES:
+            raise _Nak(ErrorCode.FILE_PROTECTED)
+        if self._files.pop(path, None) is None:
+            raise _Nak(ErrorCode.FILE_NOT_FOUND)
+        return _Ack()
+
+    def _mkdir(self, req: Frame) -> _Ack:
+        raise _Nak(ErrorCode.FILE_EXISTS if _path(req.data) in DIRECTORIES else ErrorCode.FILE_PROTECTED)
+
+    def _crc(self, req: Frame) -> _Ack:
+        data = self._files.get(_path(req.data))
+        if data is None:
+            raise _Nak(ErrorCode.FILE_NOT_FOUND)
+        return _Ack(struct.pack("<I", ftp_crc32(data)))
+
+    def _list(self, req: Frame) -> _Ack:
+        """"List Directory": entries from index ``offset``; NAK EOF past the last one."""
+        path = _path(req.data)
+        if path not in DIRECTORIES:
+            raise _Nak(ErrorCode.FILE_NOT_FOUND)
+        entries = self._entries(path)
+        if req.offset >= len(entries):
+            raise _Nak(ErrorCode.EOF)
+        out = b""
+        for entry in entries[req.offset:]:
+            if len(entry) > MAX_DATA:
+                entry = b"S\0"  # cannot be sent: "S(kip)"
+            if len(out) + len(entry) > MAX_DATA:
+                break
+            out += entry
+        return _Ack(out)
+
+    def _entries(self, directory: str) -> list[bytes]:
+        dirs = sorted(d for d in DIRECTORIES if d != directory and _parent(d) == directory)
+        files = sorted(p for p in self._files if _parent(p) == directory)
+        return ([b"D" + _name(d).encode() + b"\0" for d in dirs]
+                + [b"F" + _name(p).encode() + b"\t%d\0" % len(self._files[p]) for p in files])
+
+
+# --- paths: "<path>" in data[] (NUL-terminated or not), absolute or relative to "/" ------------------
+
+def _path(data: bytes) -> str:
+    """The normalised absolute path; NAK Fail for names this file system cannot hold."""
+    try:
+        text = data.split(b"\0", 1)[0].decode("ascii")
+    except UnicodeDecodeError:
+        raise _Nak(ErrorCode.FAIL) from None
+    parts = [p for p in text.split("/") if p not in ("", ".")]
+    if any(p == ".." or not p.isprintable() for p in parts):
+        raise _Nak(ErrorCode.FAIL)
+    return "/" + "/".join(parts)
+
+
+def _file_path(data: bytes) -> str:
+    """A path where a file may be: not a directory, in one of the directories."""
+    path = _path(data)
+    if path in DIRECTORIES:
+        raise _Nak(ErrorCode.FILE_PROTECTED)
+    if _parent(path) not in DIRECTORIES:
+        raise _Nak(ErrorCode.FILE_NOT_FOUND)  # "All parent directories must exist"
+    return path
+
+
+def _parent(path: str) -> str:
+    return path.rsplit("/", 1)[0] or "/"
+
+
+def _name(path: str) -> str:
+    return path.rsplit("/", 1)[1]

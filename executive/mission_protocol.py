@@ -1,0 +1,535 @@
+"""The MAVLink mission protocol, both ends, as pure state machines (https://mavlink.io/en/services/mission.html).
+
+No sockets and no pymavlink import: messages come in as plain values (peer,
+seq, count, ``MissionItem``, ``now_s``) and every handler returns a tuple of
+outgoing value objects (``RequestItem``, ``Ack``, ``Count``, ``Item``,
+``RequestList``, ``StatusText``). ``encode`` turns one into a pymavlink
+message with a ``MAVLink`` instance; ``dispatch`` feeds a received pymavlink
+message to a ``MissionReceiver``. A peer is a ``(system, component)`` tuple.
+
+- ``MissionReceiver``: the vehicle's side (the executive, system 1 component
+  191). Upload ("Upload a Mission to the Vehicle"): MISSION_COUNT ->
+  MISSION_REQUEST_INT(0..count-1) <- MISSION_ITEM_INT -> MISSION_ACK; the
+  ``accept`` hook judges the whole list before anything replaces the current
+  one ("Mission update must be robust!"). Download ("Download a Mission from
+  the Vehicle"): MISSION_REQUEST_LIST -> MISSION_COUNT, then each
+  MISSION_REQUEST_INT / legacy MISSION_REQUEST -> MISSION_ITEM_INT, so
+  ``wp list`` in MAVProxy works. MISSION_CLEAR_ALL and a count of 0 clear
+  ("Clear Missions"), subject to ``accept(())``.
+- ``MissionSender``: the ground side of an upload (``lrauv`` uploads).
+- ``MissionDownloader``: the ground side of a download.
+
+Timeouts and retries follow "Timeouts and Retries": 1500 ms by default, 250 ms
+for mission items, 5 retries, then the operation is cancelled
+(MAV_MISSION_OPERATION_CANCELLED) and the machine is idle again.
+
+Deliberate choices: an item *ahead* of the expected one is dropped and the
+expected one re-requested ("Mission items must be received in order"); a
+duplicate of an item already stored is dropped without a re-request (the
+timeout recovers a lost request; re-requesting on every duplicate would keep
+both ends sending everything twice after one loss). Legacy MISSION_ITEM
+(float degrees, about 1 m resolution in float32) is accepted through
+``item_from_message``; items are always sent as MISSION_ITEM_INT ("Deprecated
+Types: MISSION_ITEM"). Only mission_type 0 (a flight plan) is supported:
+fence and rally transfers are answered MAV_MISSION_UNSUPPORTED. MISSION_ACK
+carries no text, so a refusal's reason also goes out as STATUSTEXT (MAVLink 2
+chunks of 50 characters) just before the ACK.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum, unique
+from typing import Any, Union
+
+from planner.errors import PlannerError
+from planner.waypoints import MAX_GOALS, MissionItem, MissionResult, to_e7
+
+__all__ = [
+    "Ack", "Count", "Item", "MissionDownloader", "MissionReceiver", "MissionResult", "MissionSender", "MissionType",
+    "Outgoing", "Peer", "Refusal", "RequestItem", "RequestList", "StatusText", "dispatch", "encode",
+    "item_from_message", "status_chunks",
+]
+
+Peer = tuple[int, int]  # (system id, component id)
+
+DEFAULT_TIMEOUT_S = 1.5  # "Timeouts and Retries": timeout (default)
+ITEM_TIMEOUT_S = 0.25  # timeout (mission items)
+MAX_RETRIES = 5
+STATUSTEXT_LEN = 50
+MAV_SEVERITY_WARNING = 4
+
+
+@unique
+class MissionType(IntEnum):
+    """MAV_MISSION_TYPE."""
+
+    MISSION = 0
+    FENCE = 1
+    RALLY = 2
+    ALL = 255
+
+
+# Outgoing value objects: what to send, to whom. `encode` makes the MAVLink message.
+
+
+@dataclass(frozen=True)
+class RequestItem:
+    """MISSION_REQUEST_INT: send me item ``seq``."""
+
+    peer: Peer
+    seq: int
+    mission_type: int = MissionType.MISSION
+
+
+@dataclass(frozen=True)
+class Ack:
+    """MISSION_ACK with a MAV_MISSION_RESULT."""
+
+    peer: Peer
+    result: MissionResult
+    mission_type: int = MissionType.MISSION
+
+
+@dataclass(frozen=True)
+class Count:
+    """MISSION_COUNT: starts an upload, or answers MISSION_REQUEST_LIST."""
+
+    peer: Peer
+    count: int
+    mission_type: int = MissionType.MISSION
+
+
+@dataclass(frozen=True)
+class Item:
+    """MISSION_ITEM_INT."""
+
+    peer: Peer
+    item: MissionItem
+
+
+@dataclass(frozen=True)
+class RequestList:
+    """MISSION_REQUEST_LIST: starts a download."""
+
+    peer: Peer
+    mission_type: int = MissionType.MISSION
+
+
+@dataclass(frozen=True)
+class StatusText:
+    """STATUSTEXT (broadcast): one chunk of at most 50 characters; ``chunk_id`` 0 means a single chunk."""
+
+    text: str
+    severity: int = MAV_SEVERITY_WARNING
+    chunk_id: int = 0
+    chunk_seq: int = 0
+
+
+Outgoing = Union[RequestItem, Ack, Count, Item, RequestList, StatusText]
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """What ``accept`` may return to refuse with a specific MAV_MISSION_RESULT (a bare string means ERROR)."""
+
+    result: MissionResult
+    reason: str
+
+
+Verdict = Union[str, Refusal, None]
+
+
+def status_chunks(text: str, *, chunk_id: int, severity: int = MAV_SEVERITY_WARNING) -> tuple[StatusText, ...]:
+    """``text`` as STATUSTEXT chunks (mavlink.io STATUSTEXT: ``id``/``chunk_seq``; a short chunk ends the text)."""
+    if len(text) <= STATUSTEXT_LEN:
+        return (StatusText(text, severity),)
+    parts = [text[i:i + STATUSTEXT_LEN] for i in range(0, len(text), STATUSTEXT_LEN)]
+    if len(parts[-1]) == STATUSTEXT_LEN:
+        parts.append("")  # an empty (all-null) chunk marks the end
+    return tuple(StatusText(p, severity, chunk_id, n) for n, p in enumerate(parts))
+
+
+@dataclass
+class _Upload:
+    peer: Peer
+    count: int
+    items: list[MissionItem] = field(default_factory=list)
+    deadline_s: float = 0.0
+    requests: int = 1  # MISSION_REQUEST_INT sent for the expected item
+
+
+@dataclass(frozen=True)
+class _Finished:
+    peer: Peer
+    count: int
+    acks: tuple[Outgoing, ...]
+
+
+class MissionReceiver:
+    """The vehicle's side: receives uploads (judged by ``accept``) and serves downloads of the accepted list.
+
+    ``accept(items)`` is called once with the complete list (``()`` to clear)
+    and returns None to accept, a reason string to refuse with MAV_MISSION_ERROR,
+    or a ``Refusal`` with a specific result; raising ``PlannerError`` refuses
+    with its message (and the ``result`` of a ``WaypointError``).
+    """
+
+    def __init__(self, accept: Callable[[tuple[MissionItem, ...]], Verdict], *, items: Sequence[MissionItem] = (),
+                 item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = MAX_RETRIES, max_items: int = MAX_GOALS + 1) -> None:
+        self._accept = accept
+        self._items = tuple(items)
+        self.item_timeout_s = item_timeout_s
+        self.retries = retries
+        self.max_items = max_items
+        self._upload: _Upload | None = None
+        self._finished: _Finished | None = None  # to answer a re-sent last item whose ACK was lost
+        self._text_id = 0
+        self.last_refusal: str | None = None
+
+    @property
+    def items(self) -> tuple[MissionItem, ...]:
+        """The accepted list, served for download."""
+        return self._items
+
+    @property
+    def uploading_from(self) -> Peer | None:
+        return None if self._upload is None else self._upload.peer
+
+    def on_count(self, peer: Peer, count: int, mission_type: int, now_s: float) -> tuple[Outgoing, ...]:
+        """MISSION_COUNT: start (or restart) an upload; a count of 0 clears."""
+        if mission_type != MissionType.MISSION:
+            return self._refuse(peer, 0, MissionResult.UNSUPPORTED, f"mission_type {mission_type} is not supported; "
+                                "only missions (0)", mission_type)
+        if self._upload is not None and self._upload.peer != peer:
+            return (Ack(peer, MissionResult.DENIED),)  # busy with another peer's upload
+        self._upload = None
+        if count > self.max_items:
+            return self._refuse(peer, count, MissionResult.NO_SPACE, f"{count} items: at most {self.max_items}")
+        if count <= 0:
+            return self._finish(peer, ())
+        self._finished = None
+        self._upload = _Upload(peer, count, deadline_s=now_s + self.item_timeout_s)
+        return (RequestItem(peer, 0),)
+
+    def on_item(self, peer: Peer, item: MissionItem, now_s: float) -> tuple[Outgoing, ...]:
+        """MISSION_ITEM_INT (or legacy MISSION_ITEM, see ``item_from_message``)."""
+        up = self._upload
+        if up is None or up.peer != peer:
+            done = self._finished
+            if up is None and done is not None and done.peer == peer and item.seq == done.count - 1:
+                return done.acks  # the ACK was lost and the last item re-sent
+            return ()
+        if item.mission_type != MissionType.MISSION:
+            return ()
+        expected = len(up.items)
+        if item.seq != expected:
+            if item.seq > expected:  # out of sequence: drop it, re-request the expected one
+                up.requests += 1
+                up.deadline_s = now_s + self.item_timeout_s
+                return (RequestItem(peer, expected),)
+            return ()  # a duplicate of a stored item
+        up.items.append(item)
+        if len(up.items) == up.count:
+            self._upload = None
+            return self._finish(peer, tuple(up.items))
+        up.requests = 1
+        up.deadline_s = now_s + self.item_timeout_s
+        return (RequestItem(peer, expected + 1),)
+
+    def on_request_list(self, peer: Peer, mission_type: int, now_s: float) -> tuple[Outgoing, ...]:
+        """MISSION_REQUEST_LIST: answer with the count of the accepted list."""
+        if mission_type != MissionType.MISSION:
+            return (Ack(peer, MissionResult.UNSUPPORTED, mission_type),)
+        return (Count(peer, len(self._items)),)
+
+    def on_request(self, peer: Peer, seq: int, now_s: float, mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        """MISSION_REQUEST_INT or MISSION_REQUEST during a download: the item, always as MISSION_ITEM_INT."""
+        if mission_type != MissionType.MISSION:
+            return (Ack(peer, MissionResult.UNSUPPORTED, mission_type),)
+        if not 0 <= seq < len(self._items):
+            return (Ack(peer, MissionResult.INVALID_SEQUENCE),)
+        return (Item(peer, self._items[seq]),)
+
+    def on_ack(self, peer: Peer, result: int, mission_type: int, now_s: float) -> tuple[Outgoing, ...]:
+        """MISSION_ACK: ends a download; an error from the uploading peer cancels its upload."""
+        up = self._upload
+        if up is not None and up.peer == peer and result != MissionResult.ACCEPTED and mission_type == MissionType.MISSION:
+            self._upload = None
+        return ()
+
+    def on_clear_all(self, peer: Peer, mission_type: int, now_s: float) -> tuple[Outgoing, ...]:
+        """MISSION_CLEAR_ALL: the same as uploading an empty mission."""
+        return self.on_count(peer, 0, mission_type, now_s)
+
+    def tick(self, now_s: float) -> tuple[Outgoing, ...]:
+        """Re-request the expected item after a timeout; cancel after ``retries`` re-requests."""
+        up = self._upload
+        if up is None or now_s < up.deadline_s:
+            return ()
+        expected = len(up.items)
+        if up.requests > self.retries:
+            self._upload = None
+            self.last_refusal = f"upload from {up.peer[0]}/{up.peer[1]} timed out: no item {expected} after {up.requests} requests"
+            return (Ack(up.peer, MissionResult.OPERATION_CANCELLED),)
+        up.requests += 1
+        up.deadline_s = now_s + self.item_timeout_s
+        return (RequestItem(up.peer, expected),)
+
+    def _finish(self, peer: Peer, items: tuple[MissionItem, ...]) -> tuple[Outgoing, ...]:
+        result, reason = self._judge(items)
+        if result == MissionResult.ACCEPTED:
+            self._items = items
+            self.last_refusal = None
+            acks: tuple[Outgoing, ...] = (Ack(peer, result),)
+        else:
+            acks = self._refuse(peer, len(items), result, reason)
+        self._finished = _Finished(peer, len(items), acks)
+        return acks
+
+    def _refuse(self, peer: Peer, count: int, result: MissionResult, reason: str,
+                mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        self.last_refusal = reason
+        self._text_id = self._text_id % 65535 + 1
+        return (*status_chunks(f"mission refused: {reason}", chunk_id=self._text_id), Ack(peer, result, mission_type))
+
+    def _judge(self, items: tuple[MissionItem, ...]) -> tuple[MissionResult, str]:
+        try:
+            verdict = self._accept(items)
+        except PlannerError as exc:
+            return MissionResult(getattr(exc, "result", MissionResult.ERROR)), str(exc)
+        if verdict is None:
+            return MissionResult.ACCEPTED, ""
+        if isinstance(verdict, Refusal):
+            return (verdict.result if verdict.result != MissionResult.ACCEPTED else MissionResult.ERROR), verdict.reason
+        return MissionResult.ERROR, str(verdict)
+
+
+class MissionSender:
+    """The ground side of an upload: MISSION_COUNT, then each requested item, until MISSION_ACK.
+
+    On a timeout the last message is re-sent (MISSION_COUNT until the first
+    request, then the last item); after ``retries`` re-sends the upload fails.
+    """
+
+    def __init__(self, target: Peer, *, timeout_s: float = DEFAULT_TIMEOUT_S, item_timeout_s: float = ITEM_TIMEOUT_S,
+                 retries: int = MAX_RETRIES) -> None:
+        self.target = target
+        self.timeout_s = timeout_s
+        self.item_timeout_s = item_timeout_s
+        self.retries = retries
+        self._items: tuple[MissionItem, ...] = ()
+        self._last: Outgoing | None = None
+        self._sends = 0
+        self._deadline_s = float("inf")
+        self._highest = -1  # highest seq requested so far
+        self._done = False
+        self._result: MissionResult | None = None
+        self._error: str | None = None
+
+    @property
+    def done(self) -> bool:
+        return self._done
+
+    @property
+    def result(self) -> MissionResult | None:
+        """The vehicle's MAV_MISSION_RESULT; None while running or after a timeout."""
+        return self._result
+
+    @property
+    def error(self) -> str | None:
+        """Why the upload failed, or None."""
+        return self._error
+
+    def start(self, items: Sequence[MissionItem], now_s: float) -> tuple[Outgoing, ...]:
+        """Begin an upload of ``items`` (seq 0..n-1, in order)."""
+        items = tuple(items)
+        for n, it in enumerate(items):
+            if it.seq != n:
+                raise ValueError(f"item {n} has seq {it.seq}; expected {n}")
+        self._items, self._highest, self._done, self._result, self._error = items, -1, False, None, None
+        return self._send(Count(self.target, len(items)), now_s, self.timeout_s)
+
+    def on_request(self, seq: int, now_s: float, mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        """MISSION_REQUEST_INT (or MISSION_REQUEST): send that item."""
+        if self._done or self._last is None or mission_type != MissionType.MISSION or not 0 <= seq < len(self._items):
+            return ()
+        self._highest = max(self._highest, seq)
+        return self._send(Item(self.target, self._items[seq]), now_s, self.item_timeout_s)
+
+    def on_ack(self, result: int, now_s: float, mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        """MISSION_ACK: the end, accepted or not."""
+        if self._done or self._last is None or mission_type != MissionType.MISSION:
+            return ()
+        if result == MissionResult.ACCEPTED and self._highest < len(self._items) - 1:
+            return ()  # a stale ACCEPTED from an earlier upload: not every item has been asked for
+        self._done = True
+        try:
+            self._result = MissionResult(result)
+        except ValueError:
+            self._result = MissionResult.ERROR
+        if self._result != MissionResult.ACCEPTED:
+            self._error = f"{self._result.mav_name} ({self._result.description})"
+        return ()
+
+    def tick(self, now_s: float) -> tuple[Outgoing, ...]:
+        if self._done or self._last is None or now_s < self._deadline_s:
+            return ()
+        if self._sends > self.retries:
+            self._done = True
+            what = "no MISSION_REQUEST for item 0" if isinstance(self._last, Count) else (
+                "no MISSION_ACK" if self._highest == len(self._items) - 1 else f"no request after item {self._highest}")
+            self._error = f"timed out: {what} after sending it {self._sends} times"
+            return ()
+        timeout = self.timeout_s if isinstance(self._last, Count) else self.item_timeout_s
+        self._sends += 1
+        self._deadline_s = now_s + timeout
+        return (self._last,)
+
+    def _send(self, out: Outgoing, now_s: float, timeout_s: float) -> tuple[Outgoing, ...]:
+        """Send ``out`` in answer to progress; only ``tick`` counts re-sends."""
+        self._last, self._sends, self._deadline_s = out, 1, now_s + timeout_s
+        return (out,)
+
+
+class MissionDownloader:
+    """The ground side of a download: MISSION_REQUEST_LIST, MISSION_COUNT, each item in order, then MISSION_ACK."""
+
+    def __init__(self, target: Peer, *, timeout_s: float = DEFAULT_TIMEOUT_S, item_timeout_s: float = ITEM_TIMEOUT_S,
+                 retries: int = MAX_RETRIES) -> None:
+        self.target = target
+        self.timeout_s = timeout_s
+        self.item_timeout_s = item_timeout_s
+        self.retries = retries
+        self._count: int | None = None
+        self._items: list[MissionItem] = []
+        self._last: Outgoing | None = None
+        self._sends = 0
+        self._deadline_s = float("inf")
+        self._done = False
+        self._error: str | None = None
+
+    @property
+    def done(self) -> bool:
+        return self._done
+
+    @property
+    def error(self) -> str | None:
+        return self._error
+
+    @property
+    def items(self) -> tuple[MissionItem, ...]:
+        return tuple(self._items)
+
+    def start(self, now_s: float) -> tuple[Outgoing, ...]:
+        self._count, self._items, self._done, self._error = None, [], False, None
+        return self._send(RequestList(self.target), now_s, self.timeout_s)
+
+    def on_count(self, count: int, now_s: float, mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        if self._done or self._count is not None or mission_type != MissionType.MISSION:
+            return ()
+        self._count = count
+        return self._next(now_s)
+
+    def on_item(self, item: MissionItem, now_s: float) -> tuple[Outgoing, ...]:
+        if self._done or self._count is None or item.mission_type != MissionType.MISSION:
+            return ()
+        if item.seq != len(self._items):
+            return self._send(RequestItem(self.target, len(self._items)), now_s, self.item_timeout_s) \
+                if item.seq > len(self._items) else ()
+        self._items.append(item)
+        return self._next(now_s)
+
+    def on_ack(self, result: int, now_s: float, mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        if self._done or mission_type != MissionType.MISSION or result == MissionResult.ACCEPTED:
+            return ()
+        self._done = True
+        try:
+            r = MissionResult(result)
+            self._error = f"{r.mav_name} ({r.description})"
+        except ValueError:
+            self._error = f"MISSION_ACK {result}"
+        return ()
+
+    def tick(self, now_s: float) -> tuple[Outgoing, ...]:
+        if self._done or self._last is None or now_s < self._deadline_s:
+            return ()
+        if self._sends > self.retries:
+            self._done = True
+            what = "no MISSION_COUNT" if self._count is None else f"no item {len(self._items)}"
+            self._error = f"timed out: {what} after {self._sends} requests"
+            return ()
+        self._sends += 1
+        self._deadline_s = now_s + (self.timeout_s if isinstance(self._last, RequestList) else self.item_timeout_s)
+        return (self._last,)
+
+    def _next(self, now_s: float) -> tuple[Outgoing, ...]:
+        assert self._count is not None
+        if len(self._items) >= self._count:
+            self._done = True
+            return (Ack(self.target, MissionResult.ACCEPTED),)
+        return self._send(RequestItem(self.target, len(self._items)), now_s, self.item_timeout_s)
+
+    def _send(self, out: Outgoing, now_s: float, timeout_s: float) -> tuple[Outgoing, ...]:
+        """Send ``out`` in answer to progress; only ``tick`` counts re-sends."""
+        self._last, self._sends, self._deadline_s = out, 1, now_s + timeout_s
+        return (out,)
+
+
+# The pymavlink edge: duck-typed messages in, messages from a `MAVLink` instance out.
+
+
+def encode(mav: Any, out: Outgoing) -> Any:
+    """The MAVLink message for an outgoing value object, built with ``mav`` (a pymavlink ``MAVLink``)."""
+    if isinstance(out, Item):
+        it, (ts, tc) = out.item, out.peer
+        return mav.mission_item_int_encode(ts, tc, it.seq, it.frame, it.command, it.current, it.autocontinue,
+                                           it.param1, it.param2, it.param3, it.param4, it.x_lat_e7, it.y_lon_e7,
+                                           it.z, it.mission_type)
+    if isinstance(out, RequestItem):
+        return mav.mission_request_int_encode(*out.peer, out.seq, out.mission_type)
+    if isinstance(out, Ack):
+        return mav.mission_ack_encode(*out.peer, int(out.result), out.mission_type)
+    if isinstance(out, Count):
+        return mav.mission_count_encode(*out.peer, out.count, out.mission_type)
+    if isinstance(out, RequestList):
+        return mav.mission_request_list_encode(*out.peer, out.mission_type)
+    if isinstance(out, StatusText):
+        text = out.text.encode("utf-8")[:STATUSTEXT_LEN]
+        return mav.statustext_encode(out.severity, text, out.chunk_id, out.chunk_seq)
+    raise TypeError(f"not a mission protocol message: {out!r}")
+
+
+def item_from_message(msg: Any) -> MissionItem:
+    """A MissionItem from MISSION_ITEM_INT, or from legacy MISSION_ITEM (float degrees, rounded to degE7)."""
+    legacy = msg.get_type() == "MISSION_ITEM"
+    x = to_e7(msg.x) if legacy else int(msg.x)
+    y = to_e7(msg.y) if legacy else int(msg.y)
+    return MissionItem(int(msg.seq), int(msg.frame), int(msg.command), int(msg.current), int(msg.autocontinue),
+                       float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4), x, y, float(msg.z),
+                       int(getattr(msg, "mission_type", 0)))
+
+
+_RECEIVER_MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_LIST",
+                                "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_CLEAR_ALL"})
+
+
+def dispatch(receiver: MissionReceiver, msg: Any, now_s: float, *, system: int, component: int) -> tuple[Outgoing, ...]:
+    """Feed one received pymavlink message to the receiver if it is a mission message addressed to us."""
+    kind = msg.get_type()
+    if kind not in _RECEIVER_MESSAGES or (msg.target_system, msg.target_component) != (system, component):
+        return ()
+    peer = (msg.get_srcSystem(), msg.get_srcComponent())
+    mission_type = int(getattr(msg, "mission_type", 0))
+    if kind == "MISSION_COUNT":
+        return receiver.on_count(peer, int(msg.count), mission_type, now_s)
+    if kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+        return receiver.on_item(peer, item_from_message(msg), now_s)
+    if kind == "MISSION_REQUEST_LIST":
+        return receiver.on_request_list(peer, mission_type, now_s)
+    if kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+        return receiver.on_request(peer, int(msg.seq), now_s, mission_type)
+    if kind == "MISSION_ACK":
+        return receiver.on_ack(peer, int(msg.type), mission_type, now_s)
+    return receiver.on_clear_all(peer, mission_type, now_s)

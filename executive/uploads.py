@@ -1,0 +1,72 @@
+"""Uploads addressed to the executive: goals by the mission protocol, files by MAVLink FTP.
+
+This is the only place that knows which messages belong to which service. It routes
+each message addressed to us (system 1, component 191, or broadcast) to the protocol's
+state machine (``executive.mission_protocol``, ``executive.ftp``) and encodes the replies
+for the link the request came on. What to do with a finished upload is the loop's
+business: the two ``accept`` hooks return None to take it or a reason to refuse it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from executive import mavlink_bridge as bridge
+from executive import mission_protocol as mp
+from executive.ftp import FtpServer
+from planner.errors import PlannerError
+from planner.waypoints import items_to_goals
+
+_MISSION = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT",
+                      "MISSION_REQUEST", "MISSION_ACK", "MISSION_CLEAR_ALL"})
+
+
+class Uploads:
+    """Mission-protocol and FTP servers behind one ``handle``; replies go back on the caller's link."""
+
+    MESSAGES = _MISSION | {"FILE_TRANSFER_PROTOCOL"}
+
+    def __init__(self, *, accept_goals: Callable[[tuple[Any, ...]], str | None],
+                 accept_file: Callable[[str, bytes], str | None], refused: Callable[[str, str], None]) -> None:
+        self._accept_goals = accept_goals
+        self._refused = refused
+        self.ftp = FtpServer(accept=accept_file)
+        self.missions = mp.MissionReceiver(accept=self._accept_items)
+        self._mav: Any = None  # the link of the last mission-protocol peer, for retries
+
+    def _accept_items(self, items: tuple[mp.MissionItem, ...]) -> str | None:
+        try:
+            goals = items_to_goals(items)
+        except PlannerError as exc:  # the protocol answers with the error's own MAV_MISSION_RESULT
+            self._refused("mission", str(exc))
+            raise
+        return self._accept_goals(goals)
+
+    def handle(self, msg: Any, mav: Any, wall_s: float) -> list[Any]:
+        """Replies (encoded with ``mav``) to one message; [] when it is not for us."""
+        kind = msg.get_type()
+        if kind not in self.MESSAGES or not _for_us(msg):
+            return []
+        peer = (msg.get_srcSystem(), msg.get_srcComponent())
+        if kind == "FILE_TRANSFER_PROTOCOL":
+            reply = self.ftp.handle(bytes(msg.payload))
+            if reply is None:
+                return []
+            return [mav.file_transfer_protocol_encode(0, peer[0], peer[1], reply)]
+        self._mav = mav
+        outs = mp.dispatch(self.missions, msg, wall_s, system=bridge.EXECUTIVE_SYSTEM,
+                           component=bridge.EXECUTIVE_COMPONENT)
+        return [mp.encode(mav, out) for out in outs]
+
+    def tick(self, wall_s: float) -> list[tuple[Any, Any]]:
+        """(link, message) pairs due by time: mission-protocol re-requests and give-ups."""
+        if self._mav is None:
+            return []
+        return [(self._mav, mp.encode(self._mav, out)) for out in self.missions.tick(wall_s)]
+
+
+def _for_us(msg: Any) -> bool:
+    system = getattr(msg, "target_system", 0)
+    component = getattr(msg, "target_component", 0)
+    return system in (0, bridge.EXECUTIVE_SYSTEM) and component in (0, bridge.EXECUTIVE_COMPONENT)

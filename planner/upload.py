@@ -1,0 +1,106 @@
+"""``lrauv upload MISSION.yaml --to ADDRESS``: send a mission to a running executive, as a ground station would.
+
+1. Tables: each ``--table`` must serve one of the mission's goals; a goal without one is
+   planned here, on shore, with the mission's settings (``lrauv plan`` for that goal).
+2. Goals: the MAVLink mission protocol (``planner.mission_client``, items as in
+   ``planner.waypoints``), to system 1 component 191 by default.
+3. Tables: MAVLink FTP to ``/tables/goal-N.lrpt`` (``planner.ftp_client``).
+
+The executive checks each part and refuses it with a reason (sent as STATUSTEXT and
+logged); a refused part never replaces the running plan. Any refusal here exits 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from planner.errors import PlannerError
+
+GCS_SYSTEM, GCS_COMPONENT = 255, 190  # a ground station's usual MAVLink identity (MAVProxy, QGC)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    up = sub.add_parser("upload", help="upload a mission's goals and tables to a running executive over MAVLink")
+    up.add_argument("mission", type=Path, help="mission YAML")
+    up.add_argument("--to", required=True, metavar="ADDRESS",
+                    help="pymavlink address of the executive's ground-station link, e.g. udpout:127.0.0.1:14551")
+    up.add_argument("--table", type=Path, action="append", default=[],
+                    help="a ready policy table for one of the goals (repeatable); other goals are planned here")
+    up.add_argument("--forecast", type=Path, help="forecast to plan on (default: the mission's source)")
+    up.add_argument("--target-system", type=int, default=1)
+    up.add_argument("--target-component", type=int, default=191)
+    up.add_argument("--timeout-s", type=float, default=5.0, help="per-request reply timeout (default 5)")
+    up.add_argument("--quiet", action="store_true")
+
+
+def run(args: argparse.Namespace) -> int:
+    from executive import plans
+    from planner.mission import load_mission
+    from planner.table import PolicyTable
+
+    mission = load_mission(args.mission)
+    plan = plans.MissionPlan(goals=mission.goals, tables=(None,) * len(mission.goals))
+    blobs: dict[int, bytes] = {}
+    for path in args.table:
+        try:
+            data = path.read_bytes()
+        except OSError as exc:
+            raise PlannerError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
+        verdict = plans.check_table(PolicyTable.from_bytes(data, name=str(path)), plan)
+        if not verdict.accepted or verdict.goal_index is None:
+            raise PlannerError(f"{path}: {verdict.reason} in {args.mission}")
+        blobs[verdict.goal_index] = data
+    say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
+    with tempfile.TemporaryDirectory(prefix="lrauv-upload-") as tmp:
+        for n, goal in enumerate(mission.goals):
+            if n not in blobs:
+                say(f"planning goal {n} on shore")
+                blobs[n] = _plan_goal(args.mission, goal.goal, args.forecast, Path(tmp) / f"goal-{n}.lrpt")
+        conn = _connect(args.to)
+        try:
+            _send(conn, mission, blobs, args, say)
+        finally:
+            conn.close()
+    return 0
+
+
+def _plan_goal(mission_path: Path, goal, forecast: Path | None, out: Path) -> bytes:  # type: ignore[no-untyped-def]
+    from planner.cli import main as lrauv
+
+    argv = ["plan", str(mission_path), "--quiet", f"--out={out}", f"--goal={goal.lon_deg!r},{goal.lat_deg!r},{goal.depth_m!r}",
+            f"--goal-radius={goal.radius_cells}"]
+    if forecast is not None:
+        argv.append(f"--forecast={forecast}")
+    if lrauv(argv) != 0:
+        raise PlannerError(f"{mission_path}: planning goal ({goal.lon_deg:g}, {goal.lat_deg:g}) failed (see above)")
+    return out.read_bytes()
+
+
+def _connect(address: str):  # type: ignore[no-untyped-def]
+    os.environ.setdefault("MAVLINK20", "1")
+    from pymavlink import mavutil
+
+    try:
+        return mavutil.mavlink_connection(address, source_system=GCS_SYSTEM, source_component=GCS_COMPONENT)
+    except OSError as exc:
+        raise PlannerError(f"--to {address}: cannot open: {exc}") from None
+
+
+def _send(conn, mission, blobs: dict[int, bytes], args: argparse.Namespace, say) -> None:  # type: ignore[no-untyped-def]
+    from planner.ftp_client import put_file
+    from planner.mission_client import upload_goals
+    from planner.waypoints import goals_to_items
+
+    first = mission.goals[0].goal
+    items = goals_to_items(mission.goals, home_lat_deg=first.lat_deg, home_lon_deg=first.lon_deg)
+    target = {"target_system": args.target_system, "target_component": args.target_component}
+    upload_goals(conn, items, timeout_s=args.timeout_s * 2, **target)
+    say(f"goals: {len(mission.goals)} accepted by system {args.target_system} component {args.target_component}")
+    for n in sorted(blobs):
+        remote = f"/tables/goal-{n}.lrpt"
+        put_file(conn, blobs[n], remote, timeout_s=args.timeout_s, **target)
+        say(f"table for goal {n}: {len(blobs[n]):,} bytes accepted as {remote}")

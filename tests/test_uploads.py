@@ -1,0 +1,224 @@
+"""Uploads, replanning, multi-goal missions and failsafes on a running executive, over real UDP (issue 3).
+
+The simulated vehicle (``vehicle_sim.endpoint.Simulator``) runs in a thread on an
+ephemeral port, the executive in another, with its ground-station link on a second
+ephemeral port. Uploads go in as a ground station sends them: ``lrauv upload``, the
+project's own clients, and pymavlink's MAVFTP client. Every thread is stopped by its test.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import threading
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavftp, mavutil  # noqa: E402
+
+from executive import plans  # noqa: E402
+from executive.helm import HelmConfig  # noqa: E402
+from executive.loop import ExecConfig, Executive  # noqa: E402
+from executive.recorder import read_messages  # noqa: E402
+from executive.state import Phase, SubMode  # noqa: E402
+from planner.cli import main as lrauv  # noqa: E402
+from planner.errors import PlannerError  # noqa: E402
+from planner.ftp_client import put_file  # noqa: E402
+from planner.mission import load_mission  # noqa: E402
+from planner.mission_client import upload_goals  # noqa: E402
+from planner.plan import PlanRequest, make_plan  # noqa: E402
+from planner.settings import Goal  # noqa: E402
+from planner.waypoints import MissionItem, goals_to_items  # noqa: E402
+from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
+from vehicle_sim.world import World  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DEMO = REPO / "missions" / "demo.yaml"
+SPEEDUP = 200.0
+
+pytestmark = pytest.mark.slow
+
+
+def _plan(forecast: Path, goal: Goal, **settings):  # type: ignore[no-untyped-def]
+    mission = load_mission(DEMO)
+    request = PlanRequest(forecast_path=forecast, goal=goal, depths_m=mission.region.depths_m,
+                          settings=replace(mission.settings, **settings), bbox=mission.region.bbox,
+                          nx=mission.region.nx, ny=mission.region.ny, time_index=0)
+    return make_plan(request).table
+
+
+class Live:
+    """A simulated vehicle and an executive (with a ground-station link) in threads."""
+
+    def __init__(self, forecast: Path, plan: plans.MissionPlan, log: Path, *, start: tuple[float, float],
+                 mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False, **helm) -> None:  # type: ignore[no-untyped-def]
+        # The vehicle boots 6.5 h into the forecast, after issue 1's issue time (6 h): a newer
+        # issue that arrives during the run is then one that exists at that time.
+        self.sim = Simulator(World.load(forecast), SimConfig(start_lon_deg=start[0], start_lat_deg=start[1], port=0,
+                                                             speedup=SPEEDUP, seed=3, start_offset_s=6.5 * 3600))
+        self._sim_stop = threading.Event()
+        self._sim_thread = threading.Thread(target=self.sim.run, kwargs={"stop_event": self._sim_stop}, daemon=True)
+        self._sim_thread.start()
+        config = ExecConfig(link=f"udpout:127.0.0.1:{self.sim.port}", log_path=log, gcs_link="udpin:127.0.0.1:0",
+                            mission_path=mission, watch_dir=watch, work_dir=log.parent / "work", max_wall_s=120.0,
+                            exit_on_arrival=exit_on_arrival, linger_s=5.0, helm=HelmConfig(**helm))
+        self.executive = Executive(config, plan)
+        self.gcs_port = self.executive.gcs.port.getsockname()[1]
+        self._stop = threading.Event()
+        self.summary = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        self.summary = self.executive.run(self._stop)
+
+    def ground_station(self):  # type: ignore[no-untyped-def]
+        return mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.gcs_port}", source_system=255, source_component=190)
+
+    def wait(self, predicate, timeout_s: float = 30.0) -> bool:  # type: ignore[no-untyped-def]
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            time.sleep(0.02)
+        return False
+
+    def running(self) -> bool:
+        return self.executive.helm.phase is Phase.RUNNING and self.executive._counts["decisions"] > 5
+
+    def join(self, timeout_s: float = 120.0):  # type: ignore[no-untyped-def]
+        self._thread.join(timeout_s)
+        return self.stop()
+
+    def stop(self):  # type: ignore[no-untyped-def]
+        self._stop.set()
+        self._thread.join(timeout=10)
+        self._sim_stop.set()
+        self._sim_thread.join(timeout=10)
+        assert not self._thread.is_alive() and not self._sim_thread.is_alive()
+        return self.summary
+
+
+def _west_of(table, cells: int = 3) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    lat, lon = table.goal_lat_deg, table.goal_lon_deg - cells * table.dlon_deg
+    assert table.lookup(lat, lon, 0.0, 0.0).reason == "ok"
+    return lon, lat
+
+
+@pytest.fixture()
+def live(demo_plan, synthetic_forecast, tmp_path):
+    table = demo_plan.table
+    mission = load_mission(DEMO)
+    plan = plans.MissionPlan(goals=mission.goals, tables=(table,))
+    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=_west_of(table), watch=tmp_path / "inbox")
+    try:
+        assert rig.wait(rig.running), "the executive did not start following the plan"
+        yield rig
+    finally:
+        rig.stop()
+
+
+@pytest.fixture(scope="module")
+def optimistic_table(synthetic_forecast):
+    """The demo goal planned another way: a different table for the same goal and grid."""
+    mission = load_mission(DEMO)
+    return _plan(synthetic_forecast, mission.goals[0].goal, criterion="optimistic")
+
+
+def _policy(log: Path) -> list[dict]:
+    return [payload for _topic, _t, payload in read_messages(log, ["/executive/policy"])]
+
+
+def test_lrauv_upload_sends_goals_and_table_and_the_table_is_swapped_in(live, optimistic_table, tmp_path):
+    path = tmp_path / "optimistic.lrpt"
+    optimistic_table.save(path)
+    before = live.executive._counts["decisions"]
+    code = lrauv(["upload", str(DEMO), "--to", f"udpout:127.0.0.1:{live.gcs_port}", "--table", str(path), "--quiet"])
+    assert code == 0
+    assert live.wait(lambda: live.executive.table.crc32 == optimistic_table.crc32, 10.0)
+    swap = live.executive.swaps[-1]
+    assert swap["source"] == "upload /tables/goal-0.lrpt" and swap["table_crc32"] == f"{optimistic_table.crc32:08x}"
+    assert swap["previous"]["table_crc32"] != swap["table_crc32"]
+    assert live.executive._counts["decisions"] > before  # the loop kept deciding throughout
+    assert live.wait(lambda: live.executive._counts["decisions"] > before + 20, 10.0)
+    live.stop()
+    records = _policy(live.executive.config.log_path)
+    assert [r["reason"] for r in records][-2:] == ["received", "swapped"]
+
+
+def test_pymavlink_mavftp_put_uploads_a_table(live, optimistic_table):
+    conn = live.ground_station()
+    try:
+        ftp = mavftp.MAVFTP(conn, target_system=1, target_component=191)
+        blob = optimistic_table.to_bytes()
+        assert ftp.cmd_put(["t.lrpt", "/tables/t.lrpt"], fh=io.BytesIO(blob)).error_code == 0
+        assert ftp.process_ftp_reply("put", timeout=20).error_code == mavftp.FtpError.Success
+    finally:
+        conn.close()
+    assert live.wait(lambda: live.executive.table.crc32 == optimistic_table.crc32, 10.0)
+
+
+@pytest.mark.parametrize("damage", ["flipped byte", "truncated", "not a table", "another goal"])
+def test_a_bad_table_is_refused_and_the_running_plan_goes_on(live, optimistic_table, synthetic_forecast, damage):
+    running = live.executive.table
+    blob = bytearray(optimistic_table.to_bytes())
+    if damage == "flipped byte":
+        blob[len(blob) // 2] ^= 0x40
+    elif damage == "truncated":
+        blob = blob[: len(blob) // 2]
+    elif damage == "not a table":
+        blob = bytearray(b"CDF\x01" + bytes(2000))
+    else:
+        g = running
+        blob = bytearray(_plan(synthetic_forecast, Goal(lon_deg=g.goal_lon_deg - 0.05, lat_deg=g.goal_lat_deg,
+                                                        depth_m=0.0)).to_bytes())
+    conn = live.ground_station()
+    try:
+        with pytest.raises(PlannerError, match="refused by the vehicle"):
+            put_file(conn, bytes(blob), "/tables/bad.lrpt", timeout_s=2.0)
+    finally:
+        conn.close()
+    before = live.executive._counts["decisions"]
+    assert live.wait(lambda: live.executive._counts["decisions"] > before + 10, 10.0)
+    assert live.executive.table is running and live.executive.swaps == []
+    live.stop()
+    refused = [r for r in _policy(live.executive.config.log_path) if r["reason"] == "refused"]
+    assert len(refused) == 1 and refused[0]["refusal"]
+
+
+def test_bad_mission_items_are_refused_and_the_running_plan_goes_on(live):
+    running = live.executive.plan
+    mission = load_mission(DEMO)
+    items = list(goals_to_items(mission.goals, home_lat_deg=33.4, home_lon_deg=-117.8))
+    items[1] = replace(items[1], command=22)  # NAV_TAKEOFF is not a goal
+    conn = live.ground_station()
+    try:
+        with pytest.raises(PlannerError, match="22"):
+            upload_goals(conn, items, timeout_s=5.0)
+    finally:
+        conn.close()
+    assert live.executive.plan is running and live.executive.staged is None
+    assert isinstance(items[0], MissionItem)
+
+
+def test_a_new_forecast_in_the_watched_directory_is_planned_off_loop_and_swapped_in(live, tmp_path):
+    from planner.synthetic import SyntheticSettings, write_synthetic
+
+    running = live.executive.table
+    inbox = tmp_path / "inbox"
+    inbox.mkdir(exist_ok=True)
+    staging = tmp_path / "issue1.nc"
+    write_synthetic(staging, SyntheticSettings(seed=0, hours=24), issue_number=1)
+    os.replace(staging, inbox / "issue1.nc")  # appears whole, as a forecast feed should deliver it
+    before = live.executive._counts["decisions"]
+    assert live.wait(lambda: live.executive.swaps, 60.0), "no swap after a new forecast"
+    swap = live.executive.swaps[-1]
+    assert swap["source"] == "onboard plan (new forecast issue1.nc)"
+    assert swap["previous"]["table_crc32"] == f"{running.crc32:08x}" and swap["table_crc32"] != swap["previous"]["table_crc32"]
+    assert swap["forecast_identity"] != running.forecast_identity and swap["latency_s"] >= swap["plan_s"] > 0
+    # The old plan ran while the new one was computed: decisions went on during planning.
+    assert live.executive._counts["decisions"] > before
