@@ -55,11 +55,13 @@ class Live:
     """A simulated vehicle and an executive (with a ground-station link) in threads."""
 
     def __init__(self, forecast: Path, plan: plans.MissionPlan, log: Path, *, start: tuple[float, float],
-                 mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False, **helm) -> None:  # type: ignore[no-untyped-def]
+                 mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False,
+                 speedup: float = SPEEDUP, start_depth_m: float = 0.0, **helm) -> None:  # type: ignore[no-untyped-def]
         # The vehicle boots 6.5 h into the forecast, after issue 1's issue time (6 h): a newer
         # issue that arrives during the run is then one that exists at that time.
         self.sim = Simulator(World.load(forecast), SimConfig(start_lon_deg=start[0], start_lat_deg=start[1], port=0,
-                                                             speedup=SPEEDUP, seed=3, start_offset_s=6.5 * 3600))
+                                                             speedup=speedup, seed=3, start_offset_s=6.5 * 3600,
+                                                             start_depth_m=start_depth_m))
         self._sim_stop = threading.Event()
         self._sim_thread = threading.Thread(target=self.sim.run, kwargs={"stop_event": self._sim_stop}, daemon=True)
         self._sim_thread.start()
@@ -222,3 +224,51 @@ def test_a_new_forecast_in_the_watched_directory_is_planned_off_loop_and_swapped
     assert swap["forecast_identity"] != running.forecast_identity and swap["latency_s"] >= swap["plan_s"] > 0
     # The old plan ran while the new one was computed: decisions went on during planning.
     assert live.executive._counts["decisions"] > before
+
+
+def _events(log: Path) -> list[str]:
+    return [payload["message"] for _topic, _t, payload in read_messages(log, ["/log"])]
+
+
+FAR_FENCE = ((-117.75, 33.60), (-117.70, 33.60), (-117.70, 33.65), (-117.75, 33.65))  # not around the vehicle
+
+
+@pytest.mark.parametrize(("limits", "start_depth_m", "situation", "mode"), [
+    ({"geofence": FAR_FENCE}, 0.0, "outside the geofence", SubMode.SURFACE),
+    ({"geofence": FAR_FENCE, "on_breach": "drift"}, 0.0, "outside the geofence", SubMode.ALT_HOLD),
+    ({"max_mission_time_s": 120.0}, 0.0, "exceeds max_mission_time_h", SubMode.SURFACE),
+    ({"min_battery_pct": 99.8}, 0.0, "under min_battery_pct", SubMode.SURFACE),
+    ({"max_depth_m": 4.0, "on_breach": "hold"}, 8.0, "exceeds max_depth_m", SubMode.GUIDED),
+])
+def test_each_safety_limit_fires_its_action_on_the_vehicle(demo_plan, synthetic_forecast, tmp_path, limits,
+                                                           start_depth_m, situation, mode):
+    table = demo_plan.table
+    mission = load_mission(DEMO)
+    plan = plans.MissionPlan(goals=mission.goals, tables=(table,))
+    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=_west_of(table), start_depth_m=start_depth_m,
+               **limits)
+    try:
+        assert rig.wait(lambda: rig.executive.helm.phase is Phase.SAFE, 60.0), "the limit never fired"
+        assert rig.wait(lambda: rig.sim.mode is mode, 20.0), f"the vehicle is in {rig.sim.mode}, not {mode}"
+    finally:
+        rig.stop()
+    events = _events(tmp_path / "exec.mcap")
+    assert any(situation in e and "plan suspended" in e for e in events), events
+
+
+def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_forecast, tmp_path):
+    first = demo_plan.table
+    mission = load_mission(DEMO)
+    lon, lat = _west_of(first, 3)
+    second_goal = Goal(lon_deg=lon, lat_deg=lat, depth_m=0.0)  # back where the vehicle started
+    second = _plan(synthetic_forecast, second_goal)
+    goals = (replace(mission.goals[0], on_arrival="next"), replace(mission.goals[0], goal=second_goal, on_arrival="hold"))
+    plan = plans.MissionPlan(goals=goals, tables=(first, second))
+    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0)
+    summary = rig.join(120.0)
+    assert summary.reached and rig.executive.plan.index == 1
+    events = _events(tmp_path / "exec.mcap")
+    on_to = [n for n, e in enumerate(events) if "goal 0 reached: on to goal 1" in e]
+    arrived = [n for n, e in enumerate(events) if e.startswith("goal reached")]
+    assert len(on_to) == 1 and len(arrived) == 2 and arrived[0] < on_to[0] < arrived[1]
+    assert [w["source"] for w in rig.executive.swaps] == ["next goal"]
