@@ -10,8 +10,14 @@ moment:
   design);
 - ``plan_s``: the child process ``python -m planner plan ...`` alone (the executive's figure);
 - ``latency_s``: from the watcher's report to the new table ready (the executive's figure);
-- swap wait: from the table ready to the swap at the next decision;
+- table check: the executive reading and checking the new table (CRC, shape, goal, grid) and
+  queueing it, on the loop thread;
+- swap wait: from the table ready to the swap at the next decision (the table check included);
 - end to end: until the executive's table in use changes (polled every 5 ms from here).
+
+And, to show the loop kept running: the decisions (helm ticks) between the replace and the
+swap, their rate, and the longest wall time between two of them, against the same loop for
+2 s with no replan under way.
 
 Two sizes: the demo mission (29 x 21 x 4 layers x 8 headings = 19,488 states) and the same
 bbox at 100 x 100 (320,000 states, a temporary copy of the mission with nx/ny changed). Each
@@ -63,6 +69,7 @@ ISSUES = (0, 1, 2, 3)  # issued at 0, 6, 12, 18 h; 24 h each: all cover 19 h (+ 
 CELLS_WEST = 3  # start this many (paper-grid) cells west of the goal
 POLL_S = 0.005
 SWAP_TIMEOUT_S = 90.0
+BASELINE_S = 2.0  # wall seconds of the loop with no replan, for the decision rate and gaps
 
 
 def mission_for(nx: int, ny: int, folder: Path) -> Path:
@@ -100,7 +107,11 @@ class Probe:
         self.ready: list[tuple[float, str | None]] = []  # (monotonic, error) when a planner result came in
         self.swapped: list[tuple[float, int]] = []  # (monotonic, decisions) at each swap
         self.refused: list[str] = []
+        self.handling_s: list[float] = []  # time in _replan_done (check the table, queue it): on the loop thread
+        self.last_tick = 0.0
+        self.max_gap_s = 0.0  # longest wall time between two decisions (helm ticks) since reset_gap()
         watcher_poll, replan_done, swap, refuse = ex.watcher.poll, ex._replan_done, ex._swap, ex._refuse  # type: ignore[union-attr]
+        tick = ex._tick
 
         def poll():  # type: ignore[no-untyped-def]
             found = watcher_poll()
@@ -110,8 +121,19 @@ class Probe:
             return found
 
         def done(now_s, result):  # type: ignore[no-untyped-def]
-            self.ready.append((time.monotonic(), result.error))
-            return replan_done(now_s, result)
+            t = time.monotonic()
+            self.ready.append((t, result.error))
+            try:
+                return replan_done(now_s, result)
+            finally:
+                self.handling_s.append(time.monotonic() - t)
+
+        def tick_(now_s, **kwargs):  # type: ignore[no-untyped-def]
+            t = time.monotonic()
+            if self.last_tick:
+                self.max_gap_s = max(self.max_gap_s, t - self.last_tick)
+            self.last_tick = t
+            return tick(now_s, **kwargs)
 
         def swap_(now_s):  # type: ignore[no-untyped-def]
             self.swapped.append((time.monotonic(), ex._counts["decisions"]))
@@ -125,6 +147,11 @@ class Probe:
         ex._replan_done = done  # type: ignore[method-assign]
         ex._swap = swap_  # type: ignore[method-assign]
         ex._refuse = refuse_  # type: ignore[method-assign]
+        ex._tick = tick_  # type: ignore[method-assign]
+
+    def reset_gap(self) -> None:
+        self.max_gap_s = 0.0
+        self.last_tick = time.monotonic()
 
 
 def wait(predicate, timeout_s: float, step_s: float = 0.02) -> bool:  # type: ignore[no-untyped-def]
@@ -171,6 +198,11 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
         ok = wait(lambda: ex.helm.phase is Phase.RUNNING and ex._counts["decisions"] > 5
                   and ex._unix_offset_s is not None, 30.0)
         assert ok, "the executive did not start following the plan"
+        # Baseline: the loop with no replan under way.
+        dec0, probe_t0 = ex._counts["decisions"], time.monotonic()
+        probe.reset_gap()
+        time.sleep(BASELINE_S)
+        baseline = {"rate": (ex._counts["decisions"] - dec0) / (time.monotonic() - probe_t0), "gap": probe.max_gap_s}
         plan_runs = [("cold", ISSUES[k % len(ISSUES)]) for k in range(1 if cold else 0)]
         plan_runs += [("warm", ISSUES[(k + len(plan_runs)) % len(ISSUES)]) for k in range(repeat)]
         for k, (kind, issue) in enumerate(plan_runs):
@@ -185,11 +217,13 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
             n_swaps, n_ready = len(probe.swapped), len(probe.ready)
             dec0 = ex._counts["decisions"]
             vt0 = ex.vehicle.time_s
+            probe.reset_gap()
             t_replace = time.monotonic()
             os.replace(staged, inbox / name)
             changed = wait(lambda: ex.table is not old or len(probe.ready) > n_ready and probe.ready[-1][1], SWAP_TIMEOUT_S,
                            POLL_S)
             t_use = time.monotonic()
+            max_gap = probe.max_gap_s
             os.environ.pop("NUMBA_CACHE_DIR", None)
             if not changed or ex.table is old:
                 err = probe.ready[-1][1] if len(probe.ready) > n_ready else "timed out"
@@ -205,7 +239,11 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
                 "swap_wait_s": t_swap - t_ready, "e2e_s": t_use - t_replace, "decisions": dec_swap - dec0,
                 "vehicle_s": (ex.vehicle.time_s or 0.0) - (vt0 or 0.0), "phase": ex.helm.phase.value,
                 "crc_changed": swap["table_crc32"] != swap["previous"]["table_crc32"],
+                "handling_ms": 1000 * probe.handling_s[n_ready], "max_gap_ms": 1000 * max_gap,
+                "rate": (dec_swap - dec0) / (t_swap - t_replace),
             })
+            if kind == "cold":
+                rows[-1]["cold_cache_files"] = nbi_count(folder / "numba-empty")
             time.sleep(0.3)
     finally:
         os.environ.pop("NUMBA_CACHE_DIR", None)
@@ -214,8 +252,14 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
         sim_stop.set()
         sim_thread.join(timeout=15)
         assert not ex_thread.is_alive() and not sim_thread.is_alive(), "a thread did not stop"
-    print(f"  {states:,} states ({nx} x {ny} x 4 x 8): initial plan in-process {init_s:.2f} s; "
-          f"{ex._counts['decisions']} decisions in the run; refusals: {len(probe.refused)}", flush=True)
+    print(f"  {states:,} states ({nx} x {ny} x 4 x 8): initial plan in-process {init_s:.2f} s; table"
+          f" {len(table.to_bytes()):,} bytes; {ex._counts['decisions']} decisions in the run; refusals:"
+          f" {len(probe.refused)}; no replan ({BASELINE_S:g} s): {baseline['rate']:.0f} decisions/s,"
+          f" longest gap {1000 * baseline['gap']:.1f} ms", flush=True)
+    for r in rows:
+        if "cold_cache_files" in r:
+            print(f"  cold run: the empty numba cache held {r['cold_cache_files']} index files after it"
+                  " (the child compiled and cached the solver)")
     return rows
 
 
@@ -250,13 +294,13 @@ def main() -> int:
             rows += run_size(states, nx, ny, work, truth, issue_files, args.repeat, cold=not args.no_cold and i == 0)
     print(f"numba cache after: {nbi_count(cache)} index files; total {time.perf_counter() - t_all:.0f} s wall")
     print()
-    print("| states | run | cache | issue | detect (s) | plan_s (s) | latency_s (s) | swap wait (ms) | end to end (s)"
-          " | decisions during | vehicle s during | phase |")
-    print("|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    print("| states | run | cache | issue | detect (s) | plan_s (s) | latency_s (s) | table check (ms)"
+          " | swap wait (ms) | end to end (s) | decisions during | decisions/s | longest gap (ms) | vehicle s | phase |")
+    print("|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for r in rows:
         print(f"| {r['states']:,} | {r['run']} | {r['kind']} | {r['issue']} | {r['detect_s']:.2f} | {r['plan_s']:.2f}"
-              f" | {r['latency_s']:.2f} | {1000 * r['swap_wait_s']:.0f} | {r['e2e_s']:.2f} | {r['decisions']}"
-              f" | {r['vehicle_s']:.0f} | {r['phase']} |")
+              f" | {r['latency_s']:.2f} | {r['handling_ms']:.1f} | {1000 * r['swap_wait_s']:.0f} | {r['e2e_s']:.2f}"
+              f" | {r['decisions']} | {r['rate']:.0f} | {r['max_gap_ms']:.1f} | {r['vehicle_s']:.0f} | {r['phase']} |")
     print()
     print("warm runs, median (range):")
     print("| states | runs | detect (s) | plan_s (s) | latency_s (s) | end to end (s) | decisions during |")
