@@ -29,7 +29,7 @@ issued at 0, 6, 12, 18 h) all cover that time, so every repetition plans on a di
 (``NUMBA_CACHE_DIR`` pointed at a new folder), so it compiles the solver; the other runs load
 the compiled code from the project's cache (``planner/__pycache__``), whose state is printed.
 
-    .venv/bin/python bench/bench_replan.py [--repeat 4] [--no-cold] [--sizes 19488,320000]
+    .venv/bin/python bench/bench_replan.py [--repeat 5] [--no-cold] [--sizes 19488,320000]
 """
 
 from __future__ import annotations
@@ -51,14 +51,14 @@ os.environ.setdefault("MAVLINK20", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from executive import plans  # noqa: E402
-from executive.loop import ExecConfig, Executive  # noqa: E402
-from executive.state import Phase  # noqa: E402
-from planner.mission import load_mission  # noqa: E402
-from planner.plan import PlanRequest, make_plan  # noqa: E402
-from planner.synthetic import SyntheticSettings, write_synthetic  # noqa: E402
-from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
-from vehicle_sim.world import World  # noqa: E402
+from executive import plans
+from executive.loop import ExecConfig, Executive
+from executive.state import Phase
+from planner.mission import load_mission
+from planner.plan import PlanRequest, make_plan
+from planner.synthetic import SyntheticSettings, write_synthetic
+from vehicle_sim.endpoint import SimConfig, Simulator
+from vehicle_sim.world import World
 
 DEMO = REPO / "missions" / "demo.yaml"
 SIZES = {19_488: (29, 21), 320_000: (100, 100)}  # states -> (nx, ny), 4 layers x 8 headings
@@ -110,6 +110,7 @@ class Probe:
         self.handling_s: list[float] = []  # time in _replan_done (check the table, queue it): on the loop thread
         self.last_tick = 0.0
         self.max_gap_s = 0.0  # longest wall time between two decisions (helm ticks) since reset_gap()
+        self.max_gap_at = 0.0  # when that gap ended
         watcher_poll, replan_done, swap, refuse = ex.watcher.poll, ex._replan_done, ex._swap, ex._refuse  # type: ignore[union-attr]
         tick = ex._tick
 
@@ -130,8 +131,8 @@ class Probe:
 
         def tick_(now_s, **kwargs):  # type: ignore[no-untyped-def]
             t = time.monotonic()
-            if self.last_tick:
-                self.max_gap_s = max(self.max_gap_s, t - self.last_tick)
+            if self.last_tick and t - self.last_tick > self.max_gap_s:
+                self.max_gap_s, self.max_gap_at = t - self.last_tick, t
             self.last_tick = t
             return tick(now_s, **kwargs)
 
@@ -220,15 +221,15 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
             probe.reset_gap()
             t_replace = time.monotonic()
             os.replace(staged, inbox / name)
-            changed = wait(lambda: ex.table is not old or len(probe.ready) > n_ready and probe.ready[-1][1], SWAP_TIMEOUT_S,
-                           POLL_S)
+            changed = wait(lambda old=old, n=n_ready: ex.table is not old or (len(probe.ready) > n and probe.ready[-1][1]),
+                           SWAP_TIMEOUT_S, POLL_S)
             t_use = time.monotonic()
-            max_gap = probe.max_gap_s
+            max_gap, max_gap_at = probe.max_gap_s, probe.max_gap_at
             os.environ.pop("NUMBA_CACHE_DIR", None)
             if not changed or ex.table is old:
                 err = probe.ready[-1][1] if len(probe.ready) > n_ready else "timed out"
                 raise RuntimeError(f"{name}: no new table in use ({err}; refusals: {probe.refused})")
-            wait(lambda: len(ex.swaps) > n_swaps, 2.0, 0.001)
+            wait(lambda n=n_swaps: len(ex.swaps) > n, 2.0, 0.001)
             swap = ex.swaps[-1]
             t_seen = probe.seen[name]
             t_ready = probe.ready[n_ready][0]
@@ -240,6 +241,7 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
                 "vehicle_s": (ex.vehicle.time_s or 0.0) - (vt0 or 0.0), "phase": ex.helm.phase.value,
                 "crc_changed": swap["table_crc32"] != swap["previous"]["table_crc32"],
                 "handling_ms": 1000 * probe.handling_s[n_ready], "max_gap_ms": 1000 * max_gap,
+                "gap_at_s": max_gap_at - t_seen,
                 "rate": (dec_swap - dec0) / (t_swap - t_replace),
             })
             if kind == "cold":
@@ -264,13 +266,15 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
 
 
 def fmt_range(values: list[float], digits: int = 2) -> str:
+    if len(values) == 1:
+        return f"{values[0]:.{digits}f}"
     return f"{statistics.median(values):.{digits}f} ({min(values):.{digits}f} to {max(values):.{digits}f})"
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="19488,320000", help="states, comma-separated: 19488 and/or 320000")
-    ap.add_argument("--repeat", type=int, default=4, help="warm replans per size (default 4)")
+    ap.add_argument("--repeat", type=int, default=5, help="warm replans per size (default 5)")
     ap.add_argument("--no-cold", action="store_true", help="skip the replan with an empty numba cache")
     args = ap.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
@@ -295,25 +299,28 @@ def main() -> int:
     print(f"numba cache after: {nbi_count(cache)} index files; total {time.perf_counter() - t_all:.0f} s wall")
     print()
     print("| states | run | cache | issue | detect (s) | plan_s (s) | latency_s (s) | table check (ms)"
-          " | swap wait (ms) | end to end (s) | decisions during | decisions/s | longest gap (ms) | vehicle s | phase |")
-    print("|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+          " | swap wait (ms) | end to end (s) | decisions during | decisions/s | longest gap (ms)"
+          " | gap ended (s after seen) | vehicle s | phase |")
+    print("|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for r in rows:
         print(f"| {r['states']:,} | {r['run']} | {r['kind']} | {r['issue']} | {r['detect_s']:.2f} | {r['plan_s']:.2f}"
               f" | {r['latency_s']:.2f} | {r['handling_ms']:.1f} | {1000 * r['swap_wait_s']:.0f} | {r['e2e_s']:.2f}"
-              f" | {r['decisions']} | {r['rate']:.0f} | {r['max_gap_ms']:.1f} | {r['vehicle_s']:.0f} | {r['phase']} |")
+              f" | {r['decisions']} | {r['rate']:.0f} | {r['max_gap_ms']:.1f}"
+              f" | {r['gap_at_s']:+.3f} | {r['vehicle_s']:.0f} | {r['phase']} |")
     print()
-    print("warm runs, median (range):")
-    print("| states | runs | detect (s) | plan_s (s) | latency_s (s) | end to end (s) | decisions during |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
+    print("median (range) per size; cold = the replan whose planner child had an empty numba cache:")
+    print("| states | cache | runs | detect (s) | plan_s (s) | latency_s (s) | table check (ms) | end to end (s)"
+          " | decisions during | longest gap (ms) |")
+    print("|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for states in sizes:
-        warm = [r for r in rows if r["states"] == states and r["kind"] == "warm"]
-        if not warm:
-            continue
-        print(f"| {states:,} | {len(warm)} | {fmt_range([r['detect_s'] for r in warm])}"
-              f" | {fmt_range([r['plan_s'] for r in warm])} | {fmt_range([r['latency_s'] for r in warm])}"
-              f" | {fmt_range([r['e2e_s'] for r in warm])}"
-              f" | {statistics.median([r['decisions'] for r in warm]):.0f}"
-              f" ({min(r['decisions'] for r in warm)} to {max(r['decisions'] for r in warm)}) |")
+        for kind in ("cold", "warm"):
+            sel = [r for r in rows if r["states"] == states and r["kind"] == kind]
+            if not sel:
+                continue
+            print(f"| {states:,} | {kind} | {len(sel)} | {fmt_range([r['detect_s'] for r in sel])}"
+                  f" | {fmt_range([r['plan_s'] for r in sel])} | {fmt_range([r['latency_s'] for r in sel])}"
+                  f" | {fmt_range([r['handling_ms'] for r in sel], 1)} | {fmt_range([r['e2e_s'] for r in sel])}"
+                  f" | {fmt_range([r['decisions'] for r in sel], 0)} | {fmt_range([r['max_gap_ms'] for r in sel], 1)} |")
     unchanged = [r for r in rows if not r["crc_changed"]]
     if unchanged:
         print(f"note: {len(unchanged)} swap(s) brought a table with the same CRC as the one it replaced")

@@ -284,15 +284,17 @@ class FtpServer:
         self._files[session.path] = data
         return True
 
-    def _open(self, session: _Session) -> int:
-        """Allocates a session id; drops the oldest session when all are taken."""
+    def _open(self, session: _Session, requested: int) -> int:
+        """Opens a session with the id the client asked for, as ArduPilot does (the reply echoes the
+        request's session byte, and MAVProxy routes replies by it); drops the oldest session when
+        all are taken, and an open session that has the same id."""
+        sid = requested & 0xFF
+        if sid in self._sessions:
+            old = self._sessions.pop(sid)
+            log.warning("FTP session %d (%s) reused by the client for a new one", sid, old.path)
         while len(self._sessions) >= self.max_sessions:
             old_id, old = self._sessions.popitem(last=False)
             log.warning("FTP session %d (%s) dropped for a new one", old_id, old.path)
-        sid = self._next_session
-        while sid in self._sessions:
-            sid = (sid + 1) & 0xFF
-        self._next_session = (sid + 1) & 0xFF
         # cached replies of an earlier session with this id are no longer valid
         for key in [k for k, v in self._replies.items() if k[2] == sid or v[2] == sid]:
             del self._replies[key]
@@ -313,7 +315,7 @@ class FtpServer:
         data = self._files.get(path)
         if data is None:
             raise _Nak(ErrorCode.FILE_NOT_FOUND)
-        sid = self._open(_Session(path, writable=False, data=data))
+        sid = self._open(_Session(path, writable=False, data=data), req.session)
         return _Ack(struct.pack("<I", len(data)), session=sid)
 
     def _open_write(self, req: Frame, *, truncate: bool) -> _Ack:
@@ -329,7 +331,7 @@ class FtpServer:
                     return _Ack(session=sid)  # a resent open whose reply was lost
                 del self._sessions[sid]  # an abandoned upload of the same path
                 log.warning("FTP session %d (%s) superseded by a new upload", sid, path)
-        sid = self._open(_Session(path, writable=True, data=bytearray(initial)))
+        sid = self._open(_Session(path, writable=True, data=bytearray(initial)), req.session)
         return _Ack(session=sid)
 
     def _write(self, req: Frame) -> _Ack:

@@ -324,8 +324,10 @@ def test_refusal_write_limits_and_reset() -> None:
 
 def test_bounded_sessions_and_files() -> None:
     server = FtpServer(accept=lambda path, data: None, max_files=2, max_sessions=2)
-    sessions = [_reply(server, _req(i, Opcode.CREATE_FILE, data=b"/tables/f%d" % i)).session for i in range(3)]
-    assert len(set(sessions)) == 3
+    # The client picks the session id and the reply echoes it (ArduPilot; MAVProxy routes replies by it).
+    sessions = [_reply(server, _req(i, Opcode.CREATE_FILE, session=40 + i, data=b"/tables/f%d" % i)).session
+                for i in range(3)]
+    assert sessions == [40, 41, 42]
     assert _nak(_reply(server, _req(10, Opcode.WRITE_FILE, session=sessions[0], data=b"x"))) == ErrorCode.INVALID_SESSION
     for i, sid in enumerate(sessions[1:], start=11):
         assert _reply(server, _req(i, Opcode.TERMINATE_SESSION, session=sid)).opcode == Opcode.ACK
