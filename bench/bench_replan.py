@@ -53,14 +53,14 @@ os.environ.setdefault("MAVLINK20", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from executive import plans
-from executive.loop import ExecConfig, Executive
-from executive.state import Phase
-from planner.mission import load_mission
-from planner.plan import PlanRequest, make_plan
-from planner.synthetic import SyntheticSettings, write_synthetic
-from vehicle_sim.endpoint import SimConfig, Simulator
-from vehicle_sim.world import World
+from executive import plans  # noqa: E402
+from executive.loop import ExecConfig, Executive  # noqa: E402
+from executive.state import Phase  # noqa: E402
+from planner.mission import load_mission  # noqa: E402
+from planner.plan import PlanRequest, make_plan  # noqa: E402
+from planner.synthetic import SyntheticSettings, write_synthetic  # noqa: E402
+from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
+from vehicle_sim.world import World  # noqa: E402
 
 DEMO = REPO / "missions" / "demo.yaml"
 SIZES = {19_488: (29, 21), 320_000: (100, 100)}  # states -> (nx, ny), 4 layers x 8 headings

@@ -149,7 +149,8 @@ def test_lrauv_upload_sends_goals_and_table_and_the_table_is_swapped_in(live, op
     assert live.wait(lambda: live.executive._counts["decisions"] > before + 20, 10.0)
     live.stop()
     records = _policy(live.executive.config.log_path)
-    assert [r["reason"] for r in records][-2:] == ["received", "swapped"]
+    crc = f"{optimistic_table.crc32:08x}"
+    assert {r["reason"] for r in records if r["table_crc32"] == crc} == {"received", "swapped"}
 
 
 def test_pymavlink_mavftp_put_uploads_a_table(live, optimistic_table):
