@@ -8,7 +8,7 @@ moment:
 - detection: until the executive's ``ForecastWatcher`` reports the file (it polls once per
   wall second and takes a file once its size and mtime held still for one poll: 1 to 2 s by
   design);
-- ``plan_s``: the child process ``python -m planner plan ...`` alone (the executive's figure);
+- ``plan_s``: the child process ``lrauv plan ...`` alone (the executive's figure);
 - ``latency_s``: from the watcher's report to the new table ready (the executive's figure);
 - table check: the executive reading and checking the new table (CRC, shape, goal, grid) and
   queueing it, on the loop thread;
@@ -132,12 +132,12 @@ class Probe:
             finally:
                 self.handling_s.append(time.monotonic() - t)
 
-        def tick_(now_s, **kwargs):  # type: ignore[no-untyped-def]
+        def tick_(now_s, *args, **kwargs):  # type: ignore[no-untyped-def]
             t = time.monotonic()
             if self.last_tick and t - self.last_tick > self.max_gap_s:
                 self.max_gap_s, self.max_gap_at = t - self.last_tick, t
             self.last_tick = t
-            return tick(now_s, **kwargs)
+            return tick(now_s, *args, **kwargs)
 
         def swap_(now_s):  # type: ignore[no-untyped-def]
             self.swapped.append((time.monotonic(), ex._counts["decisions"]))
@@ -233,7 +233,8 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
             if not changed or ex.table is old:
                 err = probe.ready[-1][1] if len(probe.ready) > n_ready else "timed out"
                 raise RuntimeError(f"{name}: no new table in use ({err}; refusals: {probe.refused})")
-            wait(lambda n=n_swaps: len(ex.swaps) > n, 2.0, 0.001)
+            if not wait(lambda n=n_swaps: len(ex.swaps) > n, 2.0, 0.001):
+                raise RuntimeError(f"{name}: the new table is in use but its swap record is missing")
             swap = ex.swaps[-1]
             t_seen = probe.seen[name]
             t_ready = probe.ready[n_ready][0]
@@ -257,6 +258,7 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
         ex_thread.join(timeout=15)
         sim_stop.set()
         sim_thread.join(timeout=15)
+        sim.close()
         assert not ex_thread.is_alive() and not sim_thread.is_alive(), "a thread did not stop"
     print(f"  {states:,} states ({nx} x {ny} x 4 x 8): initial plan in-process {init_s:.2f} s; table"
           f" {len(table.to_bytes()):,} bytes; {ex._counts['decisions']} decisions in the run; refusals:"

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from executive.helm import HelmConfig
 from planner.errors import PlannerError
-from planner.table import PolicyTable
+from planner.table import PolicyTable, read_table_file
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -34,7 +34,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     ex.add_argument("--link", default="udpout:127.0.0.1:14560",
                     help="pymavlink address of the autopilot (default udpout:127.0.0.1:14560; ArduSub SITL: tcp:127.0.0.1:5760)")
     ex.add_argument("--log", type=Path, help="MCAP log to write (default out/exec-<UTC time>.mcap)")
-    ex.add_argument("--on-arrival", choices=["hold", "surface", "drift"], help="override the mission's on_arrival")
+    ex.add_argument("--on-arrival", choices=["hold", "surface", "drift"], help="override the mission's on_arrival at its last goal")
     ex.add_argument("--exit-on-arrival", action="store_true", help="stop after the goal is reached (and --linger-s)")
     ex.add_argument("--linger-s", type=float, default=10.0, help="vehicle seconds of the arrival behaviour before exiting")
     ex.add_argument("--max-wall-s", type=float, help="stop after this much wall time")
@@ -68,7 +68,7 @@ def _exec(args: argparse.Namespace) -> int:
 
     from executive import plans
 
-    blobs = [_read(p) for p in args.table]
+    blobs = [read_table_file(p) for p in args.table]
     tables = [PolicyTable.from_bytes(data, name=str(p)) for p, data in zip(args.table, blobs)]
     helm = HelmConfig()
     watch, period_s, replan_on_new = args.watch, None, True
@@ -140,13 +140,6 @@ def _exec(args: argparse.Namespace) -> int:
     return 0 if s.reached or not args.exit_on_arrival else 1
 
 
-def _read(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise PlannerError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
-
-
 def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTable], on_arrival: str | None):  # type: ignore[no-untyped-def]
     """The helm's figures and the goal list from the mission; each table must serve one of its goals."""
     from executive import plans
@@ -154,15 +147,9 @@ def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTab
 
     m = load_mission(mission_path)
     goals = m.goals
-    if on_arrival:
-        goals = tuple(replace(g, on_arrival=on_arrival) for g in goals)  # type: ignore[arg-type]
-    plan = plans.MissionPlan(goals=goals, tables=(None,) * len(goals))
-    for path, table in zip(paths, tables):
-        verdict = plans.check_table(table, plan)
-        if not verdict.accepted:
-            raise PlannerError(f"{path}: {verdict.reason} in {mission_path}: plan the table for this mission")
-        assert verdict.goal_index is not None
-        plan = plans.with_table(plan, verdict.goal_index, table)
+    if on_arrival:  # the mission's end; goals before it keep theirs (``next``)
+        goals = (*goals[:-1], replace(goals[-1], on_arrival=on_arrival))  # type: ignore[arg-type]
+    plan = plans.assign(goals, zip(map(str, paths), tables), str(mission_path))
     if plan.table is None:
         first = goals[0].goal
         raise PlannerError(f"--table: none is for goals[0] of {mission_path} ({first.lon_deg:g}, {first.lat_deg:g},"

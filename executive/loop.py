@@ -235,7 +235,14 @@ class Executive:
         self._write_later()
 
     def _upload_message(self, msg: Any, mav: Any, now_s: float) -> None:
-        for reply in self.uploads.handle(msg, mav, time.monotonic()):
+        try:
+            replies = self.uploads.handle(msg, mav, time.monotonic())
+        except Exception as exc:  # an upload must never stop the loop: count it, say it, go on
+            self._counts["bad"] += 1
+            self._event(now_s, Event("error", f"{msg.get_type()} from {msg.get_srcSystem()}/{msg.get_srcComponent()}"
+                                              f" dropped: {type(exc).__name__}: {exc}"))
+            return
+        for reply in replies:
             self._send_on(mav, now_s, reply)
 
     def _log(self, fn: Any, *args: Any, **kwargs: Any) -> None:
@@ -277,8 +284,8 @@ class Executive:
                 return False
             self._last_time[kind] = t_boot
         self.vehicle = bridge.apply(self.vehicle, msg, now_s)
-        if kind == "SYSTEM_TIME" and msg.time_unix_usec > 0:
-            self._unix_offset_s = msg.time_unix_usec / 1e6 - msg.time_boot_ms / 1000.0
+        if kind == "SYSTEM_TIME":
+            self._unix_offset_s = bridge.unix_offset_s(msg) or self._unix_offset_s
         if kind in ("COMMAND_ACK", "STATUSTEXT"):
             level = "info" if kind == "STATUSTEXT" and msg.severity > 4 else "warning"
             if kind == "COMMAND_ACK" and msg.result == 0:
@@ -366,10 +373,9 @@ class Executive:
 
     def _refuse(self, now_s: float, what: str, reason: str, table: PolicyTable | None = None, *,
                 notify: bool = True) -> str:
-        record: dict[str, Any] = {"time_s": now_s, "reason": "refused", "refusal": f"{what}: {reason}",
-                                  **plans.identity(table)}
-        if record["table_crc32"] is None:
-            record["table_crc32"] = "00000000"
+        record: dict[str, Any] = {"time_s": now_s, "reason": "refused", "refusal": f"{what}: {reason}"}
+        if table is not None:  # a file that is no table has no identity to log
+            record.update(plans.identity(table))
         self._log(self.recorder.write, Topic.POLICY, now_s, record)
         event = Event("warning", f"refused {what}: {reason}; the running plan goes on")
         if notify:
@@ -380,10 +386,12 @@ class Executive:
 
     def _accept_goals(self, goals: tuple[Any, ...]) -> str | None:
         """Goals uploaded by the mission protocol: staged until the first goal has a table."""
-        now_s = self.clock.now_s(time.monotonic())
-        if not goals:
-            return self._refuse(now_s, "mission", "no goals")
+        now_s = self.clock.now_s(time.monotonic())  # goals is never empty: items_to_goals refuses that
         base = self._base() or MissionPlan(goals=(), tables=())
+        if tuple(goals) == base.goals:  # the running goals again (lrauv upload sends them before tables)
+            self.staged = None
+            self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted: the running goals, kept"))
+            return None
         staged = plans.adopt(tuple(goals), base)
         self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted"))
         if staged.table is not None:
@@ -445,13 +453,9 @@ class Executive:
     def _accept_forecast(self, now_s: float, name: str, data: bytes) -> str | None:
         if self.replanner is None:
             return self._refuse(now_s, name, "this executive has no mission to plan onboard (lrauv exec --mission)")
-        from planner.atomic import atomic_target
+        from planner.atomic import write_atomic
 
-        folder = self._work_dir / "forecasts"
-        folder.mkdir(parents=True, exist_ok=True)
-        path = folder / name
-        with atomic_target(path) as tmp:
-            tmp.write_bytes(data)
+        path = write_atomic(self._work_dir / "forecasts" / name, data)
         self._new_forecast(now_s, path, time.monotonic())
         return None
 

@@ -66,6 +66,13 @@ def time_boot_s(msg: Any) -> float | None:
     return None if ms is None else ms / 1000.0
 
 
+def unix_offset_s(msg: Any) -> float | None:
+    """SYSTEM_TIME: unix time minus vehicle time (s), or None while the autopilot has no UTC."""
+    if msg.time_unix_usec <= 0:
+        return None
+    return msg.time_unix_usec / 1e6 - msg.time_boot_ms / 1000.0
+
+
 def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
     """The vehicle state after one message from the autopilot (unchanged for other messages)."""
     kind = msg.get_type()

@@ -13,8 +13,10 @@ replace, is refused with a reason. A refused table never replaces the running pl
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
+from planner.errors import PlannerError
 from planner.mission import MissionGoal
 from planner.settings import Goal, OnArrival
 from planner.table import PolicyTable
@@ -88,6 +90,17 @@ def check_table(table: PolicyTable, plan: MissionPlan) -> Verdict:
     g = table
     return Verdict(None, f"its goal ({g.goal_lon_deg:.6f}, {g.goal_lat_deg:.6f}, {g.goal_depth_m:g} m,"
                          f" radius {g.goal_radius_cells}) matches no goal of the mission")
+
+
+def assign(goals: tuple[MissionGoal, ...], named: Iterable[tuple[str, PolicyTable]], mission: str) -> MissionPlan:
+    """The goals with each named table in its goal's place; PlannerError naming a table that fits no goal."""
+    plan = MissionPlan(goals=goals, tables=(None,) * len(goals))
+    for name, table in named:
+        verdict = check_table(table, plan)
+        if verdict.goal_index is None or not verdict.accepted:
+            raise PlannerError(f"{name}: {verdict.reason} in {mission}: plan the table for this mission")
+        plan = with_table(plan, verdict.goal_index, table)
+    return plan
 
 
 def with_table(plan: MissionPlan, index: int, table: PolicyTable) -> MissionPlan:

@@ -172,8 +172,8 @@ _COMMAND = _lrauv("lrauv.Command", "A command the helm sent; the remaining keys 
 _POLICY = _lrauv("lrauv.Policy", "A policy table the executive loaded, swapped in or refused", {
     "time_s": _NUM,
     "reason": {"type": "string", "enum": ["loaded", "received", "swapped", "refused"]},
-    "table_crc32": {"type": "string", "pattern": "^[0-9a-f]{8}$"},
 }, {
+    "table_crc32": {"type": "string", "pattern": "^[0-9a-f]{8}$"},  # absent only when a refused file is no table
     "source": _STR,  # what brought the table: upload PATH, onboard plan (REASON), next goal
     "goal_index": _INT,
     "previous": _OBJ,  # the replaced table's table_crc32, forecast_identity, forecast_time

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import re
 
 # Longitudes west of Greenwich are negative: `--start -118.1,33.45` must read as a value.
@@ -16,3 +17,16 @@ class CommandParser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:  # type: ignore[no-untyped-def]
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE_NUMBER
+
+
+def floats(text: str, n: int | None, what: str) -> list[float]:
+    """``n`` (any number when None) finite comma-separated numbers, e.g. ``-118.1,33.45``; an argparse type."""
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{what}: expected comma-separated numbers; got {text!r}") from None
+    if n is not None and len(values) != n:
+        raise argparse.ArgumentTypeError(f"{what}: expected {n} comma-separated numbers; got {len(values)} in {text!r}")
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{what}: expected finite numbers; got {text!r}")
+    return values

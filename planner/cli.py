@@ -13,20 +13,10 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from planner.arguments import CommandParser
+from planner.arguments import CommandParser, floats
 from planner.errors import PlannerError
 
 EXIT_BAD_INPUT = 2
-
-
-def _floats(text: str, n: int | None, what: str) -> list[float]:
-    try:
-        values = [float(x) for x in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{what}: expected comma-separated numbers; got {text!r}") from None
-    if n is not None and len(values) != n:
-        raise argparse.ArgumentTypeError(f"{what}: expected {n} comma-separated numbers; got {len(values)} in {text!r}")
-    return values
 
 
 def _costs(text: str) -> dict[str, float]:
@@ -51,13 +41,13 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--forecast", type=Path, help="forecast netCDF file")
     plan.add_argument("--variables", type=lambda t: t.split(","), help="U,V variable names, when not found by CF standard names")
     plan.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
-    plan.add_argument("--bbox", type=lambda t: _floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
+    plan.add_argument("--bbox", type=lambda t: floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
     plan.add_argument("--nx", type=int, help="columns, west to east")
     plan.add_argument("--ny", type=int, help="rows, south to north")
-    plan.add_argument("--depths", type=lambda t: _floats(t, None, "depths"), help="layer depths in metres, e.g. 0,5,10,15")
+    plan.add_argument("--depths", type=lambda t: floats(t, None, "depths"), help="layer depths in metres, e.g. 0,5,10,15")
     plan.add_argument("--time-index", type=int, help="forecast time step by position (0 = first)")
     plan.add_argument("--time", help="forecast time (ISO 8601); the nearest step is used")
-    plan.add_argument("--goal", type=lambda t: _floats(t, 3, "goal"), help="LON,LAT,DEPTH of the goal")
+    plan.add_argument("--goal", type=lambda t: floats(t, 3, "goal"), help="LON,LAT,DEPTH of the goal")
     plan.add_argument("--goal-radius", type=int, help="goal radius in cells (default 1)")
     plan.add_argument("--criterion", choices=["robust", "optimistic"])
     plan.add_argument("--uncertainty", choices=["lateral", "none"])
@@ -69,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--plot", type=Path, metavar="DIR", help="write PNG pictures of the flow, policy and nominal path here")
     plan.add_argument("--plot-heading", type=int, default=0, help="heading k (0 = E, counter-clockwise) for the policy picture")
     plan.add_argument("--plot-layer", type=int, help="layer for the policy picture (default: the goal's)")
-    plan.add_argument("--start", type=lambda t: _floats(t, 4, "start"), help="LON,LAT,DEPTH,HEADING_DEG for the nominal path")
+    plan.add_argument("--start", type=lambda t: floats(t, 4, "start"), help="LON,LAT,DEPTH,HEADING_DEG for the nominal path")
     plan.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     fc = sub.add_parser("forecast", help="inspect or generate forecasts")

@@ -18,8 +18,7 @@ import yaml
 from planner.errors import MissionError, PlannerError
 from planner.grid import BBox
 from planner.settings import BreachAction, Costs, Criterion, Goal, Model, OnArrival, PlanSettings, Uncertainty
-
-MAX_GOALS = 1000
+from planner.waypoints import MAX_GOALS
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -299,7 +299,12 @@ class PolicyTable:
             raw = zlib.decompress(stored) if flags & FLAG_ZLIB else stored
         except zlib.error as exc:
             raise TableError(f"{name}: compressed payload is corrupt: {exc}") from None
-        return cls._from_parts(header, raw, raw_len, name)
+        table = cls._from_parts(header, raw, raw_len, name)
+        if flags & FLAG_ZLIB:
+            # A compressed file is the serialisation ``crc32`` names: keep its checked CRC rather
+            # than compress the whole table again (12 ms at 320,000 states, on the executive's loop).
+            table.__dict__["crc32"] = crc
+        return table
 
     @classmethod
     def _from_parts(cls, header: dict[str, Any], raw: bytes, raw_len: int, name: str) -> PolicyTable:
@@ -363,12 +368,7 @@ class PolicyTable:
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> PolicyTable:
         """Read and check a table file."""
-        p = Path(path)
-        try:
-            data = p.read_bytes()
-        except OSError as exc:
-            raise TableError(f"{p}: cannot read: {exc.strerror}") from None
-        return cls.from_bytes(data, name=str(p))
+        return cls.from_bytes(read_table_file(path), name=str(path))
 
     @cached_property
     def crc32(self) -> int:
@@ -379,6 +379,14 @@ class PolicyTable:
         """Fields that differ from another table's grid or goal (empty when compatible)."""
         mine, theirs = self.header(), other.header()
         return [key for key in ("grid", "goal") if mine[key] != theirs[key]]
+
+
+def read_table_file(path: str | os.PathLike[str]) -> bytes:
+    """A table file's bytes, unchecked (``PolicyTable.from_bytes`` checks them); TableError naming it."""
+    try:
+        return Path(path).read_bytes()
+    except OSError as exc:
+        raise TableError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
 
 
 def _payload_len(n_cells: int) -> int:

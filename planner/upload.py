@@ -40,20 +40,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
 def run(args: argparse.Namespace) -> int:
     from executive import plans
     from planner.mission import load_mission
-    from planner.table import PolicyTable
+    from planner.table import PolicyTable, read_table_file
 
     mission = load_mission(args.mission)
-    plan = plans.MissionPlan(goals=mission.goals, tables=(None,) * len(mission.goals))
-    blobs: dict[int, bytes] = {}
-    for path in args.table:
-        try:
-            data = path.read_bytes()
-        except OSError as exc:
-            raise PlannerError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
-        verdict = plans.check_table(PolicyTable.from_bytes(data, name=str(path)), plan)
-        if not verdict.accepted or verdict.goal_index is None:
-            raise PlannerError(f"{path}: {verdict.reason} in {args.mission}")
-        blobs[verdict.goal_index] = data
+    files = {str(path): read_table_file(path) for path in args.table}
+    tables = {name: PolicyTable.from_bytes(data, name=name) for name, data in files.items()}
+    plan = plans.assign(mission.goals, tables.items(), str(args.mission))
+    names = {id(table): name for name, table in tables.items()}
+    blobs = {n: files[names[id(t)]] for n, t in enumerate(plan.tables) if t is not None}
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     with tempfile.TemporaryDirectory(prefix="lrauv-upload-") as tmp:
         for n, goal in enumerate(mission.goals):
@@ -98,7 +92,7 @@ def _send(conn, mission, blobs: dict[int, bytes], args: argparse.Namespace, say)
     first = mission.goals[0].goal
     items = goals_to_items(mission.goals, home_lat_deg=first.lat_deg, home_lon_deg=first.lon_deg)
     target = {"target_system": args.target_system, "target_component": args.target_component}
-    upload_goals(conn, items, timeout_s=args.timeout_s * 2, **target)
+    upload_goals(conn, items, **target)
     say(f"goals: {len(mission.goals)} accepted by system {args.target_system} component {args.target_component}")
     for n in sorted(blobs):
         remote = f"/tables/goal-{n}.lrpt"

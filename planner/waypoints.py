@@ -3,7 +3,7 @@
 Standard library only, apart from ``planner.settings``, ``planner.errors`` and
 ``planner.atomic``: the onboard executive imports this module and must never
 load xarray, scipy or numba (``planner.mission`` is imported lazily, for
-``MissionGoal`` and ``MAX_GOALS``).
+``MissionGoal``).
 
 The encoding (mavlink.io "Mission Protocol", sections "Mission Items" and
 "Frames & Positional Information"; ArduPilot's home convention):
@@ -50,7 +50,7 @@ MAV_CMD_NAV_WAYPOINT = 16
 WPL_HEADER = "QGC WPL 110"
 WPL_COLUMNS = ("INDEX", "CURRENT_WP", "COORD_FRAME", "COMMAND", "PARAM1", "PARAM2", "PARAM3", "PARAM4",
                "LAT", "LON", "ALT", "AUTOCONTINUE")
-MAX_GOALS = 1000  # planner.mission.MAX_GOALS (a test checks they agree); the receiver's default size
+MAX_GOALS = 1000  # goals in a mission, in YAML (planner.mission) or over MAVLink
 E7 = 1e7
 
 
@@ -227,7 +227,6 @@ def goals_to_items(goals: Sequence[MissionGoal], *, home_lat_deg: float, home_lo
 
 def items_to_goals(items: Sequence[MissionItem]) -> tuple[MissionGoal, ...]:
     """The goals in a mission (item 0 is home and skipped); WaypointError names the item and what is wrong."""
-    from planner.mission import MAX_GOALS as max_goals
     from planner.mission import MissionGoal
     from planner.settings import Goal
 
@@ -238,8 +237,8 @@ def items_to_goals(items: Sequence[MissionItem]) -> tuple[MissionGoal, ...]:
             raise WaypointError(f"item {n}: mission_type {item.mission_type} is not a mission (0)", MissionResult.UNSUPPORTED)
     if len(items) < 2:
         raise WaypointError("no goals: expected home (item 0) and at least one goal item", MissionResult.INVALID)
-    if len(items) - 1 > max_goals:
-        raise WaypointError(f"{len(items) - 1} goals: expected at most {max_goals}", MissionResult.NO_SPACE)
+    if len(items) - 1 > MAX_GOALS:
+        raise WaypointError(f"{len(items) - 1} goals: expected at most {MAX_GOALS}", MissionResult.NO_SPACE)
     goals = []
     for item in items[1:]:
         lat, lon, depth, radius, code = _goal_fields(item)

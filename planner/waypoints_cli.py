@@ -12,25 +12,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from planner.arguments import floats
 from planner.atomic import atomic_target
 from planner.errors import MissionError
 from planner.waypoints import WaypointError, goals_to_items, items_to_goals, read_wpl, write_wpl
-
-
-def _lon_lat(text: str) -> tuple[float, float]:
-    try:
-        values = [float(x) for x in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"home: expected LON,LAT in degrees; got {text!r}") from None
-    if len(values) != 2 or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"home: expected LON,LAT in degrees; got {text!r}")
-    return values[0], values[1]
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -41,7 +31,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     ex = wsub.add_parser("export", help="write a mission's goals as a waypoint file (item 0 is home)")
     ex.add_argument("mission", type=Path, help="mission YAML file")
     ex.add_argument("out", type=Path, help="waypoint file to write (QGC WPL 110)")
-    ex.add_argument("--home", type=_lon_lat, metavar="LON,LAT", help="home position (default: the first goal's)")
+    ex.add_argument("--home", type=lambda t: tuple(floats(t, 2, "home")), metavar="LON,LAT", help="home position (default: the first goal's)")
     im = wsub.add_parser("import", help="write a mission with its goals replaced by a waypoint file's")
     im.add_argument("file", type=Path, help="waypoint file (QGC WPL 110)")
     im.add_argument("--mission", type=Path, required=True, help="base mission YAML: everything but the goals")

@@ -23,21 +23,9 @@ def synthetic_forecast(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def demo_plan(synthetic_forecast):
     """The demo mission's plan on the synthetic forecast (the paper's 29 x 21 x 4 grid)."""
-    from planner.mission import load_mission
-    from planner.plan import PlanRequest, make_plan
+    from tests.helpers import plan_for
 
-    mission = load_mission(REPO / "missions" / "demo.yaml")
-    request = PlanRequest(
-        forecast_path=synthetic_forecast,
-        goal=mission.goals[0].goal,
-        depths_m=mission.region.depths_m,
-        settings=mission.settings,
-        bbox=mission.region.bbox,
-        nx=mission.region.nx,
-        ny=mission.region.ny,
-        time_index=0,
-    )
-    return make_plan(request)
+    return plan_for(synthetic_forecast)
 
 
 @pytest.fixture()

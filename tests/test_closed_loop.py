@@ -29,6 +29,8 @@ from executive.state import SubMode  # noqa: E402
 from vehicle_sim.cli import wait_ready  # noqa: E402
 from vehicle_sim.demo import stop_process  # noqa: E402
 
+from tests.helpers import start_west_of_goal, wait_until  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 LRAUV = [sys.executable, "-m", "planner.cli"]
 SPEEDUP = 400.0
@@ -158,29 +160,13 @@ class ExecThread:
         return self.join(10)
 
 
-def _start_near_goal(table, cells: int = 3) -> tuple[float, float]:  # type: ignore[no-untyped-def]
-    """A water position ``cells`` cells west of the goal (open water in the built-in forecast)."""
-    lat, lon = table.goal_lat_deg, table.goal_lon_deg - cells * table.dlon_deg
-    assert table.lookup(lat, lon, 0.0, 0.0).reason == "ok"
-    return lon, lat
-
-
-def _wait(predicate, timeout_s: float) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return False
-
-
 def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
     """``lrauv demo``'s path: sim and exec as separate processes over UDP, to the goal."""
     from vehicle_sim.demo import read_track, run_closed_loop
 
     table_path = tmp_path / "demo.lrpt"
     demo_plan.table.save(table_path)
-    lon, lat = _start_near_goal(demo_plan.table)
+    lon, lat = start_west_of_goal(demo_plan.table)
     result = run_closed_loop(table=table_path, mission=REPO / "missions" / "demo.yaml", truth=synthetic_forecast,
                              start=f"{lon},{lat}", depth_m=0.0, heading_deg=90.0, speedup=SPEEDUP, out=tmp_path,
                              timeout_s=90.0)
@@ -197,7 +183,7 @@ def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
 
 
 def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan, synthetic_forecast, tmp_path):
-    lon, lat = _start_near_goal(demo_plan.table)
+    lon, lat = start_west_of_goal(demo_plan.table)
     sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10")
     relay = Relay(sim.port)
     relay.drop, relay.duplicate, relay.reorder = 0.25, 0.10, 0.05
@@ -218,16 +204,16 @@ def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan,
 
 
 def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synthetic_forecast, tmp_path):
-    lon, lat = _start_near_goal(demo_plan.table, cells=6)
+    lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "5")
     relay = Relay(sim.port)
     ex = ExecThread(demo_plan.table, relay.port, tmp_path / "hb.mcap")
     try:
-        assert _wait(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
+        assert wait_until(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
         time.sleep(0.2)
         ex.stop()  # the executive's process dies: no more heartbeats from component 191
-        assert _wait(lambda: any("heartbeat lost" in t for t in relay.texts), 20), relay.texts
-        assert _wait(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
+        assert wait_until(lambda: any("heartbeat lost" in t for t in relay.texts), 20), relay.texts
+        assert wait_until(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
     finally:
         ex.stop()
         relay.close()
@@ -235,16 +221,16 @@ def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synt
 
 
 def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, synthetic_forecast, tmp_path):
-    lon, lat = _start_near_goal(demo_plan.table, cells=6)
+    lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "600")
     relay = Relay(sim.port)
     ex = ExecThread(demo_plan.table, relay.port, tmp_path / "silent.mcap", link_loss_timeout_s=30.0)
     try:
-        assert _wait(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
+        assert wait_until(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
         time.sleep(0.2)
         relay.cut_down = True  # telemetry no longer reaches the executive; its commands still reach the vehicle
         # After 30 s of vehicle time (extrapolated by the executive's clock) it asks for SURFACE.
-        assert _wait(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
+        assert wait_until(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
         relay.cut_down = False
         summary = ex.stop()
     finally:

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from executive.recorder import LogError, read_messages
-from tests.test_closed_loop import LRAUV, Sim, _start_near_goal, _wait
+from tests.helpers import start_west_of_goal, wait_until
+from tests.test_closed_loop import LRAUV, Sim
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -60,13 +61,13 @@ def test_exec_refuses_bad_numbers(table_path, flag, value):
 @pytest.mark.slow
 def test_a_killed_executive_leaves_a_log_that_log_recover_repairs(demo_plan, table_path, synthetic_forecast, tmp_path):
     """kill -9 the executive mid-mission; `lrauv log recover` gives back everything flushed before the kill."""
-    lon, lat = _start_near_goal(demo_plan.table, cells=6)
+    lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "600")
     log = tmp_path / "killed.mcap"
     ex = subprocess.Popen([*LRAUV, "exec", "--table", str(table_path), "--link", f"udpout:127.0.0.1:{sim.port}",
                            "--log", str(log), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        assert _wait(lambda: log.exists() and log.stat().st_size > 200_000, 60), "the executive wrote no log"
+        assert wait_until(lambda: log.exists() and log.stat().st_size > 200_000, 60), "the executive wrote no log"
         time.sleep(0.3)
         ex.send_signal(signal.SIGKILL)
         ex.wait(10)

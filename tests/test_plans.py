@@ -6,14 +6,11 @@ from dataclasses import replace
 
 from executive import plans
 from planner.mission import MissionGoal
-from planner.settings import Goal
 
 
 def _goal_of(table, **kw) -> MissionGoal:  # type: ignore[no-untyped-def]
-    g = dict(lon_deg=table.goal_lon_deg, lat_deg=table.goal_lat_deg, depth_m=table.goal_depth_m,
-             radius_cells=table.goal_radius_cells)
-    g.update(kw)
-    return MissionGoal(goal=Goal(**g), on_arrival="next")
+    """The table's own goal, changed by ``kw``, with ``on_arrival: next``."""
+    return MissionGoal(goal=replace(plans.single(table).goals[0].goal, **kw), on_arrival="next")
 
 
 def test_a_table_serves_the_goal_it_was_planned_for(demo_plan):

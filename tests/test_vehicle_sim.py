@@ -40,6 +40,8 @@ from vehicle_sim.dynamics import (  # noqa: E402
 from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
+from tests.helpers import sim_cli  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 WATER = (33.45, -118.10)  # lat, lon of open water in the synthetic forecast
 LAND = (33.69, -117.71)  # the north-east corner: coast
@@ -689,11 +691,6 @@ def test_garbage_datagrams_do_not_crash_it(threaded):
 # -- the command line ----------------------------------------------------------------------------------------
 
 
-def _cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "vehicle_sim", *args], capture_output=True, text=True, check=False,
-                          timeout=timeout, cwd=REPO)
-
-
 @pytest.mark.parametrize("args", [
     ("--forecast", "{fc}", "--start", "-117.71,33.69"),  # on land
     ("--forecast", "{fc}", "--start", "-119.5,33.45"),  # outside the forecast
@@ -701,7 +698,7 @@ def _cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
     ("--forecast", "no/such/file.nc", "--start", "-118.10,33.45"),
 ])
 def test_cli_bad_input_is_one_line_and_status_2(args, synthetic_forecast):
-    done = _cli(*(a.format(fc=synthetic_forecast) for a in args))
+    done = sim_cli(*(a.format(fc=synthetic_forecast) for a in args))
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("lrauv sim: error: ") and done.stdout == ""
@@ -710,7 +707,7 @@ def test_cli_bad_input_is_one_line_and_status_2(args, synthetic_forecast):
 
 def test_cli_runs_for_a_duration_and_stops_cleanly_on_sigterm(tmp_path, synthetic_forecast):
     track = tmp_path / "t.csv"
-    done = _cli("--forecast", str(synthetic_forecast), "--start", "-118.10,33.45", "--speedup", "1e9",
+    done = sim_cli("--forecast", str(synthetic_forecast), "--start", "-118.10,33.45", "--speedup", "1e9",
                 "--listen", "127.0.0.1:0", "--duration-s", "120", "--track", str(track), "--quiet")
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("lrauv sim: listening on udp 127.0.0.1:") and done.stderr == ""

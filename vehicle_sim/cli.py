@@ -160,7 +160,7 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             raise SimError("--forecast: expected a netCDF forecast file (or --calm for still water)")
         if args.start is None:
             raise SimError("--start: expected LON,LAT of the vehicle at boot, e.g. --start -118.10,33.45")
-        world = load_truth(_forecast_paths(args.forecast))
+        world = load_truth(args.forecast)  # --forecast is repeatable: a list
         start = args.start
     lon, lat = _lon_lat(start)
     offset_s = _start_offset(args.start_time, world)
@@ -174,13 +174,6 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         track_path=args.track,
     )
     return world, config, duration
-
-
-def _forecast_paths(value: Path | str | Sequence[Path | str]) -> list[Path]:
-    """The ``--forecast`` values as a list (one path given directly, as older callers do, too)."""
-    if isinstance(value, (str, Path)):
-        return [Path(value)]
-    return [Path(v) for v in value]
 
 
 def _number(text: str, flag: str, expected: str, ok) -> float:  # type: ignore[no-untyped-def]

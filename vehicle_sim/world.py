@@ -30,7 +30,7 @@ from bisect import bisect_right
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from itertools import pairwise
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -224,29 +224,6 @@ class World:
         return block
 
 
-class Truth(Protocol):
-    """What the simulator asks of its true ocean: a ``World`` or a ``TruthSequence``.
-
-    Times ``t_s`` are seconds after ``start_unix_s``.
-    """
-
-    @property
-    def source(self) -> str: ...
-    @property
-    def start_unix_s(self) -> float: ...
-    @property
-    def dated(self) -> bool: ...
-    @property
-    def duration_s(self) -> float: ...
-    @property
-    def bbox(self) -> BBox: ...
-    @property
-    def max_depth_m(self) -> float: ...
-    def source_at(self, t_s: float) -> str: ...
-    def current_at(self, t_s: float, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[float, float]: ...
-    def is_water(self, lat_deg: float, lon_deg: float, depth_m: float, t_s: float = 0.0) -> bool: ...
-
-
 @dataclass(frozen=True, eq=False)
 class TruthSequence:
     """Dated Worlds one after another: each is the truth from its own first time until the next one's.
@@ -262,12 +239,13 @@ class TruthSequence:
 
     members: tuple[World, ...]
     offsets_s: tuple[float, ...] = field(init=False)  # member i's start, seconds after the first's
+    bbox: BBox = field(init=False)  # the lon/lat box every member covers (the first member's longitudes)
 
     def __post_init__(self) -> None:
         ordered = _ordered_members(tuple(self.members))
         object.__setattr__(self, "members", ordered)
         object.__setattr__(self, "offsets_s", tuple(w.start_unix_s - ordered[0].start_unix_s for w in ordered))
-        _common_box(ordered)  # raises when the members share no area
+        object.__setattr__(self, "bbox", _common_box(ordered))  # raises when the members share no area
 
     @property
     def source(self) -> str:
@@ -287,30 +265,29 @@ class TruthSequence:
         return max(off + w.duration_s for off, w in zip(self.offsets_s, self.members, strict=True))
 
     @property
-    def bbox(self) -> BBox:
-        """The lon/lat box every member covers (in the first member's longitude convention)."""
-        return _common_box(self.members)
-
-    @property
     def max_depth_m(self) -> float:
         """Deepest depth every member covers."""
         return min(w.max_depth_m for w in self.members)
 
     def source_at(self, t_s: float) -> str:
-        return self.members[self._index(t_s)].source
+        return self._member(t_s)[0].source
 
     def current_at(self, t_s: float, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[float, float]:
         """(east, north) current in m/s from the member in charge at ``t_s``; (0, 0) where there is no water."""
-        i = self._index(t_s)
-        return self.members[i].current_at(t_s - self.offsets_s[i], lat_deg, lon_deg, depth_m)
+        world, local_s = self._member(t_s)
+        return world.current_at(local_s, lat_deg, lon_deg, depth_m)
 
     def is_water(self, lat_deg: float, lon_deg: float, depth_m: float, t_s: float = 0.0) -> bool:
-        i = self._index(t_s)
-        return self.members[i].is_water(lat_deg, lon_deg, depth_m, t_s - self.offsets_s[i])
+        world, local_s = self._member(t_s)
+        return world.is_water(lat_deg, lon_deg, depth_m, local_s)
 
-    def _index(self, t_s: float) -> int:
-        i = bisect_right(self.offsets_s, t_s) - 1
-        return i if i > 0 else 0
+    def _member(self, t_s: float) -> tuple[World, float]:
+        """The member in charge at ``t_s`` and the time in its own terms."""
+        i = max(bisect_right(self.offsets_s, t_s) - 1, 0)
+        return self.members[i], t_s - self.offsets_s[i]
+
+
+Truth = World | TruthSequence  # what the simulator's ocean can be
 
 
 def load_truth(paths: Iterable[str | os.PathLike[str]]) -> World | TruthSequence:
