@@ -1,4 +1,4 @@
-"""MAVLink FTP server for policy-table uploads: a pure state machine, no sockets, no disk.
+"""MAVLink FTP server for policy-table and forecast uploads: a pure state machine, no sockets, no disk.
 
 Protocol: FILE_TRANSFER_PROTOCOL (message 110), https://mavlink.io/en/services/ftp.html
 (section names below are that page's). ``FtpServer.handle`` takes one request payload
@@ -6,12 +6,14 @@ and returns the reply payload, or None when no reply is due (the payload is a re
 itself). The caller owns the link: it answers the requester (sysid, compid) with
 ``file_transfer_protocol_send(0, sysid, compid, reply)``.
 
-The file system is virtual and tiny: directories ``/`` and ``/tables`` (fixed), files
-only in them. A write session (CreateFile, OpenFileWO) collects bytes in memory; when
+The file system is virtual and tiny: directories ``/``, ``/tables`` and ``/forecasts``
+(fixed), files only in them. A write session (CreateFile, OpenFileWO) collects bytes in memory; when
 it is closed (TerminateSession, or ResetSessions as PX4 and QGroundControl close an
 upload) the file goes to ``accept(path, data)``. None stores it in ``files`` (replacing
 an older file of that path) and the terminate is ACKed; a reason string discards it
 and the terminate is NAKed with Fail (the reason is logged; FTP has no field for it).
+An exception from ``accept`` refuses the file too. ``files`` holds the most recent
+accepted files: older ones are evicted to make room (see "Bounded memory" below).
 ``accept`` must judge the content itself (a policy table's own checks): a GCS that
 aborts an upload with ResetSessions ("Uploading a File": on a NAK the GCS "should
 cancel ... by sending ResetSessions") hands it a partial file. Sessions with a refused
@@ -32,27 +34,36 @@ What a client learns of a refusal depends on the client:
 
 Choices where the spec leaves room:
 
+* Sessions: the reply to OpenFileRO, CreateFile and OpenFileWO echoes the session id
+  of the request, as ArduPilot does (MAVProxy routes replies by it); an open session
+  with that id is closed first (without ``accept``).
 * Retransmissions ("Timeouts/Resending": "the drone must re-send its response if a
   request with the same sequence number is received"): the last replies are kept,
   keyed by the whole request, and a repeated request gets the same reply without
   being executed again. So a resent CreateFile gets the same session and a resent
   TerminateSession the same verdict. A request evicted from that cache is executed
   again: harmless for reads and writes; a TerminateSession then gets InvalidSession.
-* A CreateFile for the path of an open write session with nothing written yet answers
-  with that session; if data was written, the older session is dropped (an abandoned
-  upload) and a new one opened.
+* A CreateFile or OpenFileWO for the path of an open write session drops the older
+  session (an abandoned upload, discarded without ``accept``) and opens the new one.
 * BurstReadFile answers one packet per request with ``burst_complete`` set (``handle``
   returns one reply); clients ask again from the next offset.
 * CalcFileCRC32 is the CRC-32 of ArduPilot's ``crc_crc32(0, ...)`` and PX4's
   ``crc32part(..., 0)``: the reflected 0xEDB88320 polynomial with initial value 0 and
   no final XOR, i.e. ``zlib.crc32(data, 0xFFFFFFFF) ^ 0xFFFFFFFF`` (not ``zlib.crc32``).
-* CreateDirectory answers FileExists for ``/`` and ``/tables`` and FileProtected
+* CreateDirectory answers FileExists for the fixed directories and FileProtected
   otherwise; RemoveDirectory, TruncateFile and Rename are not supported
-  (UnknownCommand), so stored files change only through ``accept`` or RemoveFile.
+  (UnknownCommand), so stored files change only through ``accept``, RemoveFile and eviction.
 * Bounded memory: at most ``max_sessions`` open sessions (the oldest is dropped, without
   ``accept``, to open another), files up to ``max_file_bytes`` (a WriteFile beyond
-  that is NAKed FailErrno EFBIG), at most ``max_files`` stored files (a new path beyond
-  that is NAKed FailErrno ENOSPC) and a bounded reply cache.
+  that is NAKed FailErrno EFBIG) and a bounded reply cache. One byte budget,
+  ``max_total_bytes``, covers the open uploads and the stored files together: when an
+  upload grows (WriteFile, or OpenFileWO copying a stored file) or an accepted file is
+  stored, the oldest stored files are evicted to make room, and storing a new path
+  beyond ``max_files`` evicts the oldest too. A WriteFile that open uploads alone would
+  take over the budget is NAKed FailErrno ENOSPC and poisons its session (an
+  OpenFileWO, with no session yet, is just NAKed). Evicting, removing or replacing a
+  file closes the read sessions on it, so no byte is held outside the budget.
+* CalcFileCRC32 is computed once per stored file, on the first request, and kept with it.
 
 Not thread-safe: call ``handle`` from one thread.
 """
@@ -64,10 +75,9 @@ import logging
 import struct
 import zlib
 from collections import OrderedDict
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from enum import IntEnum
-from types import MappingProxyType
 
 log = logging.getLogger(__name__)
 
@@ -75,7 +85,7 @@ PAYLOAD_LEN = 251  # FILE_TRANSFER_PROTOCOL.payload
 MAX_DATA = 239  # "Payload Format": data[] after the 12-byte header
 # seq_number u16, session, opcode, size, req_opcode, burst_complete, padding, offset u32 (little endian)
 _HEADER = struct.Struct("<HBBBBBxI")
-DIRECTORIES = frozenset({"/", "/tables"})
+DIRECTORIES = frozenset({"/", "/tables", "/forecasts"})  # policy tables (*.lrpt), forecasts (*.nc)
 _CACHE_ENTRIES = 64
 
 
@@ -116,6 +126,11 @@ class ErrorCode(IntEnum):
     FILE_EXISTS = 8
     FILE_PROTECTED = 9
     FILE_NOT_FOUND = 10
+
+    @property
+    def spec_name(self) -> str:
+        """The name on mavlink.io ("FailErrno", "EOF")."""
+        return "EOF" if self is ErrorCode.EOF else "".join(w.capitalize() for w in self.name.split("_"))
 
 
 def ftp_crc32(data: bytes) -> int:
@@ -161,31 +176,60 @@ class _Nak(Exception):
 @dataclass(frozen=True)
 class _Ack:
     data: bytes = b""
-    session: int | None = None  # the allocated session (OpenFileRO, CreateFile, OpenFileWO); else echoed
     burst_complete: int = 0
 
 
 @dataclass
-class _Session:
+class _WriteSession:
     path: str
-    writable: bool
-    data: bytearray | bytes = field(default_factory=bytearray)
-    written: bool = False
+    data: bytearray = field(default_factory=bytearray)
     poisoned: bool = False  # a write was refused: closing discards without accept
 
 
+@dataclass(frozen=True)
+class _ReadSession:
+    path: str
+    data: bytes
+
+
+@dataclass
+class _Stored:
+    data: bytes
+    crc: int | None = None  # CalcFileCRC32, computed on the first request
+
+
+class _FilesView(Mapping[str, bytes]):
+    """Read-only live view of the stored files, oldest first."""
+
+    def __init__(self, files: dict[str, _Stored]) -> None:
+        self._files = files
+
+    def __getitem__(self, path: str) -> bytes:
+        return self._files[path].data
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._files)
+
+    def __len__(self) -> int:
+        return len(self._files)
+
+    def __repr__(self) -> str:
+        return f"<FTP files {list(self._files)}>"
+
+
 class FtpServer:
-    """The FTP state machine; ``files`` is a read-only view of the accepted files."""
+    """The FTP state machine; ``files`` is a read-only view of the most recent accepted files, oldest first."""
 
     def __init__(self, *, accept: Callable[[str, bytes], str | None], max_file_bytes: int = 64 * 1024 * 1024,
-                 max_files: int = 64, max_sessions: int = 4) -> None:
+                 max_files: int = 64, max_sessions: int = 4, max_total_bytes: int = 128 * 1024 * 1024) -> None:
         self._accept = accept
         self.max_file_bytes = max_file_bytes
         self.max_files = max_files
         self.max_sessions = max_sessions
-        self._files: dict[str, bytes] = {}
-        self._sessions: OrderedDict[int, _Session] = OrderedDict()  # oldest first
-        self._next_session = 0
+        self.max_total_bytes = max_total_bytes
+        self._files: dict[str, _Stored] = {}  # oldest first
+        self._stored_bytes = 0
+        self._sessions: OrderedDict[int, _WriteSession | _ReadSession] = OrderedDict()  # oldest first
         self._replies: OrderedDict[bytes, bytes] = OrderedDict()  # request -> reply ("Timeouts/Resending")
         self._handlers: dict[int, Callable[[Frame], _Ack]] = {
             Opcode.NONE: lambda _req: _Ack(),  # "Ignored, always ACKed"
@@ -202,17 +246,18 @@ class FtpServer:
             Opcode.CALC_FILE_CRC32: self._crc,
             Opcode.BURST_READ_FILE: self._burst,
         }
+        self._files_view = _FilesView(self._files)
 
     @property
     def files(self) -> Mapping[str, bytes]:
-        return MappingProxyType(self._files)
+        return self._files_view
 
     def handle(self, payload: bytes) -> bytes | None:
-        """The reply (251 bytes) to one request payload; None when the payload is a reply itself or not bytes."""
-        try:
-            raw = bytes(payload[:PAYLOAD_LEN]).ljust(PAYLOAD_LEN, b"\0")  # also a list of ints (msg.payload)
-        except Exception:  # not bytes at all
-            return None
+        """The reply (251 bytes) to one request payload; None when the payload is a reply itself.
+
+        Never raises, whatever the bytes.
+        """
+        raw = bytes(payload[:PAYLOAD_LEN]).ljust(PAYLOAD_LEN, b"\0")
         req = Frame.parse(raw)
         if req.opcode in (Opcode.ACK, Opcode.NAK):
             return None  # never answer a reply (two servers would ping-pong)
@@ -243,9 +288,9 @@ class FtpServer:
         except _Nak as nak:
             data = bytes([nak.code, nak.number]) if nak.code == ErrorCode.FAIL_ERRNO else bytes([nak.code])
             return Frame(seq, req.session, Opcode.NAK, len(data), req.opcode, 0, req.offset, data)
-        session = req.session if ack.session is None else ack.session
-        # the offset is echoed: MAVFTP finds the acknowledged WriteFile block by it
-        return Frame(seq, session, Opcode.ACK, len(ack.data), req.opcode, ack.burst_complete, req.offset, ack.data)
+        # the session is echoed (also by the opens, see _open); the offset too: MAVFTP finds the
+        # acknowledged WriteFile block by it
+        return Frame(seq, req.session, Opcode.ACK, len(ack.data), req.opcode, ack.burst_complete, req.offset, ack.data)
 
     # --- sessions ("TerminateSession", "ResetSessions") -------------------------------------------------
 
@@ -253,7 +298,7 @@ class FtpServer:
         session = self._sessions.pop(req.session, None)
         if session is None:
             raise _Nak(ErrorCode.INVALID_SESSION)
-        if session.writable and not self._finish(session):
+        if isinstance(session, _WriteSession) and not self._finish(session):
             raise _Nak(ErrorCode.FAIL)
         return _Ack()
 
@@ -261,19 +306,16 @@ class FtpServer:
         """Closes every session; uploads are finished as by TerminateSession, always ACKed."""
         sessions, self._sessions = list(self._sessions.values()), OrderedDict()
         for session in sessions:
-            if session.writable:
+            if isinstance(session, _WriteSession):
                 self._finish(session)
         return _Ack()
 
-    def _finish(self, session: _Session) -> bool:
+    def _finish(self, session: _WriteSession) -> bool:
         """Hands a closed upload to ``accept``; True when it was stored."""
         if session.poisoned:
             log.warning("FTP upload %s discarded: a write was refused", session.path)
             return False
-        if session.path not in self._files and len(self._files) >= self.max_files:
-            log.warning("FTP upload %s discarded: already %d files", session.path, len(self._files))
-            return False
-        data = bytes(session.data)
+        data, session.data = bytes(session.data), bytearray()  # the one copy; the buffer is freed
         try:
             reason = self._accept(session.path, data)
         except Exception as exc:  # the hook's bug must not take the server down
@@ -281,14 +323,19 @@ class FtpServer:
         if reason is not None:
             log.warning("FTP upload %s (%d bytes) refused: %s", session.path, len(data), reason)
             return False
-        self._files[session.path] = data
+        if self._upload_bytes() + len(data) > self.max_total_bytes:  # only when max_total_bytes < max_file_bytes
+            log.warning("FTP upload %s (%d bytes) discarded: over max_total_bytes", session.path, len(data))
+            return False
+        self._drop_file(session.path)  # the older version
+        self._make_room(len(data), files=1)
+        self._files[session.path] = _Stored(data)
+        self._stored_bytes += len(data)
         return True
 
-    def _open(self, session: _Session, requested: int) -> int:
-        """Opens a session with the id the client asked for, as ArduPilot does (the reply echoes the
-        request's session byte, and MAVProxy routes replies by it); drops the oldest session when
-        all are taken, and an open session that has the same id."""
-        sid = requested & 0xFF
+    def _open(self, session: _WriteSession | _ReadSession, sid: int) -> None:
+        """Opens ``session`` with the id the client asked for, as ArduPilot does (the reply echoes the
+        request's session byte, and MAVProxy routes replies by it); drops an open session that has
+        that id, and the oldest session when all are taken."""
         if sid in self._sessions:
             old = self._sessions.pop(sid)
             log.warning("FTP session %d (%s) reused by the client for a new one", sid, old.path)
@@ -299,63 +346,94 @@ class FtpServer:
         for key in [k for k, v in self._replies.items() if k[2] == sid or v[2] == sid]:
             del self._replies[key]
         self._sessions[sid] = session
-        return sid
 
-    def _session(self, req: Frame, *, writable: bool) -> _Session:
+    def _write_session(self, req: Frame) -> _WriteSession:
         session = self._sessions.get(req.session)
-        if session is None or session.writable != writable:
+        if not isinstance(session, _WriteSession):
             raise _Nak(ErrorCode.INVALID_SESSION)
         return session
+
+    def _read_session(self, req: Frame) -> _ReadSession:
+        session = self._sessions.get(req.session)
+        if not isinstance(session, _ReadSession):
+            raise _Nak(ErrorCode.INVALID_SESSION)
+        return session
+
+    # --- the byte budget ------------------------------------------------------------------------------
+
+    def _make_room(self, extra_bytes: int, files: int = 0) -> bool:
+        """Evicts the oldest stored files until ``extra_bytes`` more fit in ``max_total_bytes`` (and
+        ``files`` more in ``max_files``); False when the open uploads alone leave no room."""
+        uploads = self._upload_bytes()
+        if uploads + extra_bytes > self.max_total_bytes:
+            return False
+        while self._files and (self._stored_bytes + uploads + extra_bytes > self.max_total_bytes
+                               or len(self._files) + files > self.max_files):
+            oldest = next(iter(self._files))
+            log.warning("FTP file %s (%d bytes) evicted to make room", oldest, len(self._files[oldest].data))
+            self._drop_file(oldest)
+        return True
+
+    def _upload_bytes(self) -> int:
+        return sum(len(s.data) for s in self._sessions.values() if isinstance(s, _WriteSession))
+
+    def _drop_file(self, path: str) -> bool:
+        """Forgets a stored file and closes the read sessions on it; False when there was none."""
+        stored = self._files.pop(path, None)
+        if stored is None:
+            return False
+        self._stored_bytes -= len(stored.data)
+        for sid in [sid for sid, s in self._sessions.items() if isinstance(s, _ReadSession) and s.path == path]:
+            del self._sessions[sid]
+        return True
 
     # --- files ---------------------------------------------------------------------------------------
 
     def _open_ro(self, req: Frame) -> _Ack:
-        """"OpenFileRO": ACK carries the session and the file length (u32)."""
+        """"OpenFileRO": ACK carries the file length (u32)."""
         path = _path(req.data)
-        data = self._files.get(path)
-        if data is None:
+        stored = self._files.get(path)
+        if stored is None:
             raise _Nak(ErrorCode.FILE_NOT_FOUND)
-        sid = self._open(_Session(path, writable=False, data=data), req.session)
-        return _Ack(struct.pack("<I", len(data)), session=sid)
+        self._open(_ReadSession(path, stored.data), req.session)
+        return _Ack(struct.pack("<I", len(stored.data)))
 
     def _open_write(self, req: Frame, *, truncate: bool) -> _Ack:
         """"CreateFile" (O_CREAT | O_TRUNC) and "OpenFileWO" (O_CREAT, keeps the content)."""
         path = _file_path(req.data)
-        if path not in self._files and len(self._files) >= self.max_files:
-            raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
-        initial = b"" if truncate else self._files.get(path, b"")
+        stored = None if truncate else self._files.get(path)
+        initial = b"" if stored is None else stored.data
         for sid, open_session in list(self._sessions.items()):
-            if open_session.writable and open_session.path == path:
-                if not open_session.written:
-                    open_session.data = bytearray(initial)
-                    return _Ack(session=sid)  # a resent open whose reply was lost
+            if isinstance(open_session, _WriteSession) and open_session.path == path:
                 del self._sessions[sid]  # an abandoned upload of the same path
                 log.warning("FTP session %d (%s) superseded by a new upload", sid, path)
-        sid = self._open(_Session(path, writable=True, data=bytearray(initial)), req.session)
-        return _Ack(session=sid)
+        if not self._make_room(len(initial)):
+            raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
+        self._open(_WriteSession(path, bytearray(initial)), req.session)
+        return _Ack()
 
     def _write(self, req: Frame) -> _Ack:
         """"WriteFile": any offset, gaps read as zeros; the ACK echoes the offset."""
-        session = self._session(req, writable=True)
+        session = self._write_session(req)
         end = req.offset + len(req.data)
         if end > self.max_file_bytes:
             session.poisoned = True
             raise _Nak(ErrorCode.FAIL_ERRNO, errno.EFBIG)
         buf = session.data
-        if not isinstance(buf, bytearray):  # unreachable: write sessions hold a bytearray
-            raise _Nak(ErrorCode.INVALID_SESSION)
+        if not self._make_room(max(0, end - len(buf))):
+            session.poisoned = True
+            raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
         if len(buf) < req.offset:
             buf.extend(bytes(req.offset - len(buf)))
         buf[req.offset:end] = req.data
-        session.written = True
         return _Ack()
 
     def _read(self, req: Frame) -> _Ack:
         """"ReadFile": up to ``size`` bytes (0 asks for a full packet) from ``offset``."""
-        data = self._session(req, writable=False).data
+        data = self._read_session(req).data
         if req.offset >= len(data):
             raise _Nak(ErrorCode.EOF)
-        return _Ack(bytes(data[req.offset:req.offset + (req.size or MAX_DATA)]))
+        return _Ack(data[req.offset:req.offset + (req.size or MAX_DATA)])
 
     def _burst(self, req: Frame) -> _Ack:
         """"BurstReadFile": one packet per request, ``burst_complete`` set."""
@@ -366,7 +444,7 @@ class FtpServer:
         path = _path(req.data)
         if path in DIRECTORIES:
             raise _Nak(ErrorCode.FILE_PROTECTED)
-        if self._files.pop(path, None) is None:
+        if not self._drop_file(path):
             raise _Nak(ErrorCode.FILE_NOT_FOUND)
         return _Ack()
 
@@ -374,10 +452,12 @@ class FtpServer:
         raise _Nak(ErrorCode.FILE_EXISTS if _path(req.data) in DIRECTORIES else ErrorCode.FILE_PROTECTED)
 
     def _crc(self, req: Frame) -> _Ack:
-        data = self._files.get(_path(req.data))
-        if data is None:
+        stored = self._files.get(_path(req.data))
+        if stored is None:
             raise _Nak(ErrorCode.FILE_NOT_FOUND)
-        return _Ack(struct.pack("<I", ftp_crc32(data)))
+        if stored.crc is None:
+            stored.crc = ftp_crc32(stored.data)
+        return _Ack(struct.pack("<I", stored.crc))
 
     def _list(self, req: Frame) -> _Ack:
         """"List Directory": entries from index ``offset``; NAK EOF past the last one."""
@@ -400,7 +480,7 @@ class FtpServer:
         dirs = sorted(d for d in DIRECTORIES if d != directory and _parent(d) == directory)
         files = sorted(p for p in self._files if _parent(p) == directory)
         return ([b"D" + _name(d).encode() + b"\0" for d in dirs]
-                + [b"F" + _name(p).encode() + b"\t%d\0" % len(self._files[p]) for p in files])
+                + [b"F" + _name(p).encode() + b"\t%d\0" % len(self._files[p].data) for p in files])
 
 
 # --- paths: "<path>" in data[] (NUL-terminated or not), absolute or relative to "/" ------------------

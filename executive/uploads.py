@@ -18,14 +18,10 @@ from executive.ftp import FtpServer
 from planner.errors import PlannerError
 from planner.waypoints import items_to_goals
 
-_MISSION = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_REQUEST_LIST", "MISSION_REQUEST_INT",
-                      "MISSION_REQUEST", "MISSION_ACK", "MISSION_CLEAR_ALL"})
-
-
 class Uploads:
     """Mission-protocol and FTP servers behind one ``handle``; replies go back on the caller's link."""
 
-    MESSAGES = _MISSION | {"FILE_TRANSFER_PROTOCOL"}
+    MESSAGES = mp.RECEIVER_MESSAGES | {"FILE_TRANSFER_PROTOCOL"}
 
     def __init__(self, *, accept_goals: Callable[[tuple[Any, ...]], str | None],
                  accept_file: Callable[[str, bytes], str | None], refused: Callable[[str, str], None]) -> None:
@@ -46,17 +42,18 @@ class Uploads:
     def handle(self, msg: Any, mav: Any, wall_s: float) -> list[Any]:
         """Replies (encoded with ``mav``) to one message; [] when it is not for us."""
         kind = msg.get_type()
-        if kind not in self.MESSAGES or not _for_us(msg):
-            return []
-        peer = (msg.get_srcSystem(), msg.get_srcComponent())
         if kind == "FILE_TRANSFER_PROTOCOL":
+            if not mp.addressed_to(msg, bridge.EXECUTIVE_SYSTEM, bridge.EXECUTIVE_COMPONENT):
+                return []
+            peer = (msg.get_srcSystem(), msg.get_srcComponent())
             reply = self.ftp.handle(bytes(msg.payload))
             if reply is None:
                 return []
             return [mav.file_transfer_protocol_encode(0, peer[0], peer[1], reply)]
-        self._mav = mav
         outs = mp.dispatch(self.missions, msg, wall_s, system=bridge.EXECUTIVE_SYSTEM,
                            component=bridge.EXECUTIVE_COMPONENT)
+        if outs:
+            self._mav = mav
         return [mp.encode(mav, out) for out in outs]
 
     def tick(self, wall_s: float) -> list[tuple[Any, Any]]:
@@ -65,8 +62,3 @@ class Uploads:
             return []
         return [(self._mav, mp.encode(self._mav, out)) for out in self.missions.tick(wall_s)]
 
-
-def _for_us(msg: Any) -> bool:
-    system = getattr(msg, "target_system", 0)
-    component = getattr(msg, "target_component", 0)
-    return system in (0, bridge.EXECUTIVE_SYSTEM) and component in (0, bridge.EXECUTIVE_COMPONENT)

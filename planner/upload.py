@@ -31,9 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     up.add_argument("--table", type=Path, action="append", default=[],
                     help="a ready policy table for one of the goals (repeatable); other goals are planned here")
     up.add_argument("--forecast", type=Path, help="forecast to plan on (default: the mission's source)")
-    up.add_argument("--target-system", type=int, default=1)
-    up.add_argument("--target-component", type=int, default=191)
-    up.add_argument("--timeout-s", type=float, default=5.0, help="per-request reply timeout (default 5)")
+    up.add_argument("--target-system", type=int, help="the executive's MAVLink system (default 1)")
+    up.add_argument("--target-component", type=int, help="the executive's MAVLink component (default 191)")
+    up.add_argument("--timeout-s", type=float, default=5.0, help="MAVLink FTP: seconds to wait for each reply before resending (default 5)")
     up.add_argument("--quiet", action="store_true")
 
 
@@ -85,15 +85,17 @@ def _connect(address: str):  # type: ignore[no-untyped-def]
 
 
 def _send(conn, mission, blobs: dict[int, bytes], args: argparse.Namespace, say) -> None:  # type: ignore[no-untyped-def]
+    from executive.mavlink_bridge import EXECUTIVE_COMPONENT, EXECUTIVE_SYSTEM
     from planner.ftp_client import put_file
     from planner.mission_client import upload_goals
     from planner.waypoints import goals_to_items
 
     first = mission.goals[0].goal
     items = goals_to_items(mission.goals, home_lat_deg=first.lat_deg, home_lon_deg=first.lon_deg)
-    target = {"target_system": args.target_system, "target_component": args.target_component}
+    target = {"target_system": args.target_system or EXECUTIVE_SYSTEM,
+              "target_component": args.target_component or EXECUTIVE_COMPONENT}
     upload_goals(conn, items, **target)
-    say(f"goals: {len(mission.goals)} accepted by system {args.target_system} component {args.target_component}")
+    say(f"goals: {len(mission.goals)} accepted by system {target['target_system']} component {target['target_component']}")
     for n in sorted(blobs):
         remote = f"/tables/goal-{n}.lrpt"
         put_file(conn, blobs[n], remote, timeout_s=args.timeout_s, **target)

@@ -283,12 +283,17 @@ def _nak(frame: Frame) -> ErrorCode:
 def test_upload_out_of_order_with_retransmissions() -> None:
     seen: list[tuple[str, bytes]] = []
     server = FtpServer(accept=lambda path, data: seen.append((path, data)))  # type: ignore[func-returns-value]
-    create = _req(10, Opcode.CREATE_FILE, data=b"/tables/t.bin")
+    create = _req(10, Opcode.CREATE_FILE, session=5, data=b"/tables/t.bin")
     ack = _reply(server, create)
     assert (ack.opcode, ack.seq, ack.req_opcode, ack.size) == (Opcode.ACK, 11, Opcode.CREATE_FILE, 0)
-    sid = ack.session
-    assert _reply(server, create) == ack  # the reply was lost: same session again
-    assert _reply(server, _req(99, Opcode.CREATE_FILE, data=b"/tables/t.bin\0")).session == sid  # nothing written yet
+    assert ack.session == 5  # the client's own session id, echoed (ArduPilot; MAVProxy routes replies by it)
+    assert _reply(server, create) == ack  # the reply was lost: the same reply again, from the cache
+    assert _reply(server, _req(11, Opcode.WRITE_FILE, session=5, data=b"stale")).opcode == Opcode.ACK
+    # A new CreateFile of the path (not a resend) gets its own session and supersedes the open upload.
+    again = _reply(server, _req(99, Opcode.CREATE_FILE, session=6, data=b"/tables/t.bin\0"))
+    assert (again.opcode, again.session) == (Opcode.ACK, 6)
+    assert _nak(_reply(server, _req(98, Opcode.WRITE_FILE, session=5, data=b"x"))) == ErrorCode.INVALID_SESSION
+    sid = again.session
     w2 = _req(12, Opcode.WRITE_FILE, session=sid, offset=300, data=b"B" * 10)
     assert _reply(server, w2).offset == 300  # MAVFTP finds the block by the echoed offset
     assert _reply(server, w2).opcode == Opcode.ACK  # resent: harmless
@@ -331,9 +336,74 @@ def test_bounded_sessions_and_files() -> None:
     assert _nak(_reply(server, _req(10, Opcode.WRITE_FILE, session=sessions[0], data=b"x"))) == ErrorCode.INVALID_SESSION
     for i, sid in enumerate(sessions[1:], start=11):
         assert _reply(server, _req(i, Opcode.TERMINATE_SESSION, session=sid)).opcode == Opcode.ACK
-    full = _reply(server, _req(20, Opcode.CREATE_FILE, data=b"/tables/f9"))
-    assert (_nak(full), full.data[1]) == (ErrorCode.FAIL_ERRNO, 28)  # ENOSPC
-    assert _reply(server, _req(21, Opcode.CREATE_FILE, data=b"/tables/f1")).opcode == Opcode.ACK  # replacing is fine
+    # A third file: accepted, and the oldest one is evicted ("files" holds the most recent accepted files).
+    assert _reply(server, _req(20, Opcode.CREATE_FILE, session=50, data=b"/tables/f9")).opcode == Opcode.ACK
+    assert _reply(server, _req(21, Opcode.WRITE_FILE, session=50, data=b"9")).opcode == Opcode.ACK
+    assert _reply(server, _req(22, Opcode.TERMINATE_SESSION, session=50)).opcode == Opcode.ACK
+    assert list(server.files) == ["/tables/f2", "/tables/f9"]
+    assert _reply(server, _req(23, Opcode.CREATE_FILE, data=b"/tables/f2")).opcode == Opcode.ACK  # replacing is fine
+
+
+def test_one_byte_budget_covers_open_uploads_and_stored_files() -> None:
+    accepted: list[str] = []
+    server = FtpServer(accept=lambda path, data: accepted.append(path), max_file_bytes=800,  # type: ignore[func-returns-value]
+                       max_total_bytes=1000)
+
+    def store(seq: int, sid: int, path: bytes, size: int) -> None:
+        assert _reply(server, _req(seq, Opcode.CREATE_FILE, session=sid, data=path)).opcode == Opcode.ACK
+        assert _reply(server, _req(seq + 1, Opcode.WRITE_FILE, session=sid, data=b"s" * size)).opcode == Opcode.ACK
+        assert _reply(server, _req(seq + 2, Opcode.TERMINATE_SESSION, session=sid)).opcode == Opcode.ACK
+
+    store(0, 1, b"/tables/a", 200)
+    store(3, 1, b"/tables/b", 200)
+    store(6, 1, b"/tables/c", 200)
+    reading = _reply(server, _req(9, Opcode.OPEN_FILE_RO, session=2, data=b"/tables/a"))
+    assert reading.opcode == Opcode.ACK
+    # An upload grows: the oldest stored files make room for it, and a read of an evicted one ends.
+    assert _reply(server, _req(10, Opcode.CREATE_FILE, session=3, data=b"/tables/big")).opcode == Opcode.ACK
+    assert _reply(server, _req(11, Opcode.WRITE_FILE, session=3, offset=0, data=b"x" * 239)).opcode == Opcode.ACK
+    assert list(server.files) == ["/tables/a", "/tables/b", "/tables/c"]  # 839 bytes: still fits
+    assert _reply(server, _req(12, Opcode.WRITE_FILE, session=3, offset=500, data=b"y" * 100)).opcode == Opcode.ACK
+    assert list(server.files) == ["/tables/b", "/tables/c"]  # 600 + 400 bytes: a was evicted
+    assert _nak(_reply(server, _req(13, Opcode.READ_FILE, session=2))) == ErrorCode.INVALID_SESSION
+    # A second upload: more room is made, until the open uploads alone would take the budget: ENOSPC, poisoned.
+    assert _reply(server, _req(14, Opcode.CREATE_FILE, session=4, data=b"/tables/d")).opcode == Opcode.ACK
+    assert _reply(server, _req(15, Opcode.WRITE_FILE, session=4, data=b"d" * 200)).opcode == Opcode.ACK
+    assert list(server.files) == ["/tables/c"]
+    full = _reply(server, _req(16, Opcode.WRITE_FILE, session=4, offset=200, data=b"d" * 239))
+    assert (_nak(full), full.data[1]) == (ErrorCode.FAIL_ERRNO, 28)  # ENOSPC: 600 + 439 bytes of uploads
+    assert list(server.files) == ["/tables/c"]  # nothing evicted in vain
+    assert _nak(_reply(server, _req(17, Opcode.TERMINATE_SESSION, session=4))) == ErrorCode.FAIL  # poisoned
+    assert _reply(server, _req(18, Opcode.TERMINATE_SESSION, session=3)).opcode == Opcode.ACK
+    assert accepted == ["/tables/a", "/tables/b", "/tables/c", "/tables/big"]
+    assert list(server.files) == ["/tables/c", "/tables/big"] and len(server.files["/tables/big"]) == 600
+    # OpenFileWO copies the stored file into the upload: the copy counts too.
+    assert _reply(server, _req(19, Opcode.OPEN_FILE_WO, session=5, data=b"/tables/big")).opcode == Opcode.ACK
+    assert _reply(server, _req(20, Opcode.CREATE_FILE, session=6, data=b"/tables/e")).opcode == Opcode.ACK
+    assert _reply(server, _req(21, Opcode.WRITE_FILE, session=6, data=b"e" * 239)).opcode == Opcode.ACK
+    assert _nak(_reply(server, _req(22, Opcode.WRITE_FILE, session=6, offset=239, data=b"e" * 239))) == \
+        ErrorCode.FAIL_ERRNO
+
+
+def test_crc_is_computed_once_per_stored_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    import executive.ftp as ftp_module
+
+    calls: list[int] = []
+
+    def counting_crc(data: bytes) -> int:
+        calls.append(len(data))
+        return ftp_crc32(data)
+
+    monkeypatch.setattr(ftp_module, "ftp_crc32", counting_crc)
+    server = FtpServer(accept=lambda path, data: None)
+    for seq, payload in ((0, b"123456789"), (10, b"12345")):
+        _reply(server, _req(seq, Opcode.CREATE_FILE, data=b"/tables/t"))
+        _reply(server, _req(seq + 1, Opcode.WRITE_FILE, data=payload))
+        _reply(server, _req(seq + 2, Opcode.TERMINATE_SESSION))
+        for n in range(3):
+            crc = _reply(server, _req(seq + 3 + n, Opcode.CALC_FILE_CRC32, data=b"/tables/t"))
+            assert int.from_bytes(crc.data, "little") == _crc_crc32(0, payload)
+    assert calls == [9, 5]  # once per stored version, however often asked
 
 
 def test_read_list_crc_and_refusals() -> None:
@@ -353,7 +423,7 @@ def test_read_list_crc_and_refusals() -> None:
     assert _nak(_reply(server, _req(7, Opcode.READ_FILE, session=opened.session, offset=9))) == ErrorCode.EOF
     assert _nak(_reply(server, _req(8, Opcode.WRITE_FILE, session=opened.session, data=b"x"))) == ErrorCode.INVALID_SESSION
 
-    assert _reply(server, _req(9, Opcode.LIST_DIRECTORY, data=b"/")).data == b"Dtables\0"
+    assert _reply(server, _req(9, Opcode.LIST_DIRECTORY, data=b"/")).data == b"Dforecasts\0Dtables\0"
     assert _reply(server, _req(10, Opcode.LIST_DIRECTORY, data=b"/tables/")).data == b"Ft\t9\0"
     assert _nak(_reply(server, _req(11, Opcode.LIST_DIRECTORY, offset=1, data=b"/tables"))) == ErrorCode.EOF
     assert _nak(_reply(server, _req(12, Opcode.LIST_DIRECTORY, data=b"/nope"))) == ErrorCode.FILE_NOT_FOUND
@@ -434,5 +504,3 @@ def test_fuzz_mutated_requests_never_raise() -> None:
     assert acked >= {Opcode.CREATE_FILE, Opcode.WRITE_FILE, Opcode.TERMINATE_SESSION, Opcode.OPEN_FILE_RO,
                      Opcode.READ_FILE, Opcode.BURST_READ_FILE, Opcode.LIST_DIRECTORY, Opcode.CALC_FILE_CRC32}
     assert server.handle(b"") is not None  # all zeros: opcode None, ACKed
-    for junk in (None, 7, "text", [300], object()):
-        assert server.handle(junk) is None  # type: ignore[arg-type]

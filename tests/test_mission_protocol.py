@@ -30,17 +30,24 @@ from executive.mission_protocol import (  # noqa: E402
     MissionReceiver,
     MissionResult,
     MissionSender,
-    Refusal,
     RequestItem,
     RequestList,
     StatusText,
+    addressed_to,
     dispatch,
     encode,
     item_from_message,
     status_chunks,
 )
+from executive.mission_protocol import STATUSTEXT_LEN  # noqa: E402
 from planner.mission import MissionGoal  # noqa: E402
-from planner.mission_client import MissionDownloadError, MissionUploadError, download_items, upload_goals  # noqa: E402
+from planner.mission_client import (  # noqa: E402
+    MissionDownloadError,
+    MissionUploadError,
+    _Texts,
+    download_items,
+    upload_goals,
+)
 from planner.settings import Goal  # noqa: E402
 from planner.waypoints import MissionItem, goals_to_items, items_to_goals  # noqa: E402
 
@@ -57,12 +64,12 @@ ITEMS = goals_to_items(GOALS, home_lat_deg=33.45, home_lon_deg=-118.1)
 class Judge:
     """An accept hook that records what it saw and refuses with ``refusal`` when set."""
 
-    def __init__(self, refusal: str | Refusal | None = None, *, strict: bool = True) -> None:
+    def __init__(self, refusal: str | None = None, *, strict: bool = True) -> None:
         self.seen: list[tuple[MissionItem, ...]] = []
         self.refusal = refusal
         self.strict = strict
 
-    def __call__(self, items: tuple[MissionItem, ...]) -> str | Refusal | None:
+    def __call__(self, items: tuple[MissionItem, ...]) -> str | None:
         self.seen.append(items)
         if self.refusal is not None:
             return self.refusal
@@ -85,7 +92,7 @@ def test_receiver_requests_each_item_then_accepts_and_serves_the_list():
     judge = Judge()
     rx = MissionReceiver(judge)
     assert _upload(rx, ITEMS) == (Ack(GCS, MissionResult.ACCEPTED),)
-    assert judge.seen == [ITEMS] and rx.items == ITEMS and rx.last_refusal is None
+    assert judge.seen == [ITEMS] and rx.items == ITEMS
     assert rx.on_request_list(GCS, 0, 1.0) == (Count(GCS, len(ITEMS)),)
     assert rx.on_request(GCS, 2, 1.0) == (Item(GCS, ITEMS[2]),)
     assert rx.on_request(GCS, len(ITEMS), 1.0) == (Ack(GCS, MissionResult.INVALID_SEQUENCE),)
@@ -111,9 +118,10 @@ def test_receiver_retries_after_a_timeout_then_cancels():
     assert rx.tick(0.35) == (RequestItem(GCS, 1),)
     assert rx.tick(0.5) == ()
     assert rx.tick(0.6) == (RequestItem(GCS, 1),)
-    assert rx.tick(0.85) == (Ack(GCS, MissionResult.OPERATION_CANCELLED),)
-    assert rx.uploading_from is None and rx.tick(5.0) == ()
-    assert "no item 1 after 3 requests" in (rx.last_refusal or "")
+    out = rx.tick(0.85)
+    assert out[-1] == Ack(GCS, MissionResult.OPERATION_CANCELLED)
+    assert rx.tick(5.0) == () and rx.on_item(GCS, ITEMS[1], 5.0) == ()  # no upload any more
+    assert "no item 1 after 3 requests" in "".join(o.text for o in out[:-1])  # type: ignore[union-attr]
     assert judge.seen == [] and rx.items == ()
 
 
@@ -124,7 +132,7 @@ def test_receiver_refuses_fence_and_rally_as_unsupported():
     assert isinstance(out[0], StatusText) and "mission_type 1" in out[0].text
     assert rx.on_request_list(GCS, 2, 0.0) == (Ack(GCS, MissionResult.UNSUPPORTED, 2),)
     assert rx.on_request(GCS, 0, 0.0, 1) == (Ack(GCS, MissionResult.UNSUPPORTED, 1),)
-    assert rx.uploading_from is None
+    assert rx.on_item(GCS, ITEMS[0], 0.0) == ()  # no upload started
 
 
 def test_a_new_count_restarts_the_upload():
@@ -142,9 +150,9 @@ def test_another_peer_is_denied_while_an_upload_runs_and_too_many_items_is_no_sp
     rx = MissionReceiver(Judge(), max_items=10)
     rx.on_count(GCS, 4, 0, 0.0)
     assert rx.on_count((250, 1), 4, 0, 0.0) == (Ack((250, 1), MissionResult.DENIED),)
-    assert rx.uploading_from == GCS
+    assert rx.on_item(GCS, ITEMS[0], 0.0) == (RequestItem(GCS, 1),)  # GCS's upload goes on
     out = rx.on_count(GCS, 11, 0, 0.1)
-    assert out[-1] == Ack(GCS, MissionResult.NO_SPACE) and rx.last_refusal == "11 items: at most 10"
+    assert out == (StatusText("mission refused: 11 items: at most 10"), Ack(GCS, MissionResult.NO_SPACE))
 
 
 def test_count_zero_and_clear_all_ask_accept_with_nothing():
@@ -155,21 +163,28 @@ def test_count_zero_and_clear_all_ask_accept_with_nothing():
     judge.refusal = "cannot clear while executing"
     out = rx.on_clear_all(GCS, 0, 0.1)
     assert out == (StatusText("mission refused: cannot clear while executing"), Ack(GCS, MissionResult.ERROR))
-    assert rx.last_refusal == "cannot clear while executing"
 
 
 def test_refusals_keep_the_old_list_and_carry_a_result():
     rx = MissionReceiver(Judge("not today"), items=ITEMS[:2])
     out = _upload(rx, ITEMS)
-    assert out[-1] == Ack(GCS, MissionResult.ERROR) and rx.last_refusal == "not today" and rx.items == ITEMS[:2]
-    rx = MissionReceiver(Judge(Refusal(MissionResult.DENIED, "armed")))
-    assert _upload(rx, ITEMS)[-1] == Ack(GCS, MissionResult.DENIED)
+    assert out == (StatusText("mission refused: not today"), Ack(GCS, MissionResult.ERROR)) and rx.items == ITEMS[:2]
     rx = MissionReceiver(Judge())  # items_to_goals raises WaypointError with a specific result
     bad = (*ITEMS[:2], MissionItem(2, 6, 16, 0, 1, 0.0, 1.5, 0.0, 0.0, 334000000, -1178000000, -1.0))
     out = _upload(rx, bad)
     assert out[-1] == Ack(GCS, MissionResult.INVALID_PARAM2)
-    assert rx.last_refusal == "item 2: param2 (radius_cells) 1.5 is not a whole number >= 0"
-    assert "".join(o.text for o in out[:-1]) == f"mission refused: {rx.last_refusal}"  # type: ignore[union-attr]
+    reason = "item 2: param2 (radius_cells) 1.5 is not a whole number >= 0"
+    assert "".join(o.text for o in out[:-1]) == f"mission refused: {reason}"  # type: ignore[union-attr]
+
+
+def test_any_exception_from_accept_is_a_refusal():
+    def broken(items: tuple[MissionItem, ...]) -> str | None:
+        raise KeyError("boom")
+
+    rx = MissionReceiver(broken, items=ITEMS[:2])
+    out = _upload(rx, ITEMS)
+    assert out[-1] == Ack(GCS, MissionResult.ERROR) and rx.items == ITEMS[:2]
+    assert "".join(o.text for o in out[:-1]) == "mission refused: KeyError: 'boom'"  # type: ignore[union-attr]
 
 
 def test_a_lost_ack_is_answered_again_when_the_last_item_is_re_sent():
@@ -186,6 +201,38 @@ def test_status_chunks_split_long_reasons():
     chunks = status_chunks("x" * 120, chunk_id=3)
     assert [(c.chunk_id, c.chunk_seq, len(c.text)) for c in chunks] == [(3, 0, 50), (3, 1, 50), (3, 2, 20)]
     assert status_chunks("y" * 100, chunk_id=4)[-1] == StatusText("", chunk_id=4, chunk_seq=2)
+
+
+def _sizes(chunks) -> list[int]:  # type: ignore[no-untyped-def]
+    return [len(c.text.encode("utf-8")) for c in chunks]
+
+
+def test_status_chunks_count_utf8_bytes_and_never_cut_a_character():
+    assert status_chunks("é" * 25, chunk_id=1) == (StatusText("é" * 25),)  # 50 bytes: one chunk
+    chunks = status_chunks("é" * 30, chunk_id=1)  # 60 bytes
+    assert [c.text for c in chunks] == ["é" * 25, "é" * 5] and _sizes(chunks) == [50, 10]
+    assert _sizes(status_chunks("é" * 50, chunk_id=1)) == [50, 50, 0]  # an exact multiple: an empty last chunk
+    # "€" is 3 bytes: 16 fit in 48, the 17th would straddle; the chunk is filled to 50 with spaces, so that it
+    # does not read as the last one, and every chunk is valid UTF-8 on its own.
+    chunks = status_chunks("€" * 20, chunk_id=1)
+    assert [c.text for c in chunks] == ["€" * 16 + "  ", "€" * 4] and _sizes(chunks) == [50, 12]
+    text = "mission refused: " + "ça ne va pas, 北京 " * 9
+    chunks = status_chunks(text, chunk_id=9)
+    assert all(n == STATUSTEXT_LEN for n in _sizes(chunks)[:-1]) and _sizes(chunks)[-1] < STATUSTEXT_LEN
+    assert "".join(c.text for c in chunks).replace(" ", "") == text.replace(" ", "")
+
+
+def test_chunked_utf8_statustext_is_joined_by_the_ground_side():
+    text = "mission refused: " + "ça ne va pas: 12 °C, 北京 " * 5
+    for n in (0, 1):  # two texts, through pymavlink's wire format
+        texts = _Texts()
+        for chunk in status_chunks(text if n else text[:33], chunk_id=7):
+            texts.add(_through_the_wire(chunk))
+        assert texts.lines == [text if n else text[:33]]
+    texts = _Texts()
+    for chunk in status_chunks("x" * 100, chunk_id=8):  # an exact multiple: the empty chunk ends it
+        texts.add(_through_the_wire(chunk))
+    assert texts.lines == ["x" * 100]
 
 
 # The ground side alone.
@@ -314,6 +361,49 @@ def test_legacy_mission_item_is_accepted_with_float_degrees():
     assert dispatch(rx, msg, 0.0, system=1, component=1) == ()  # addressed to the autopilot, not us
 
 
+def test_non_finite_legacy_coordinates_are_refused_not_raised():
+    sink = _Sink()
+    gcs = mavlink.MAVLink(sink, srcSystem=255, srcComponent=190)
+    for lat, lon in ((float("nan"), -117.8), (33.4, float("inf")), (float("-inf"), float("nan")), (3e38, 0.0)):
+        gcs.send(gcs.mission_item_encode(1, 191, 1, 3, 16, 0, 1, 0, 1, 0, 0, lat, lon, -1.0))
+    rx = MissionReceiver(Judge(), items=ITEMS[:2])
+    for msg in mavlink.MAVLink(None).parse_buffer(sink.data):
+        item = item_from_message(msg)
+        assert -2**31 <= item.x_lat_e7 < 2**31 and -2**31 <= item.y_lon_e7 < 2**31  # still fits MISSION_ITEM_INT
+        rx.on_count(GCS, 2, 0, 0.0)
+        rx.on_item(GCS, ITEMS[0], 0.0)
+        out = dispatch(rx, msg, 0.0, system=1, component=191)
+        assert out[-1] in (Ack(GCS, MissionResult.INVALID_PARAM5_X), Ack(GCS, MissionResult.INVALID_PARAM6_Y))
+    assert rx.items == ITEMS[:2]
+
+
+class _Addressed:
+    def __init__(self, **targets: int) -> None:
+        self.__dict__.update(targets)
+
+
+def test_addressed_to_treats_zero_as_broadcast():
+    assert addressed_to(_Addressed(target_system=1, target_component=191), 1, 191)
+    assert addressed_to(_Addressed(target_system=0, target_component=0), 1, 191)
+    assert addressed_to(_Addressed(target_system=1, target_component=0), 1, 191)
+    assert addressed_to(_Addressed(target_system=0, target_component=191), 1, 191)
+    assert addressed_to(_Addressed(), 1, 191)  # no target fields (STATUSTEXT): everyone's
+    assert not addressed_to(_Addressed(target_system=2, target_component=191), 1, 191)
+    assert not addressed_to(_Addressed(target_system=1, target_component=1), 1, 191)
+    assert not addressed_to(_Addressed(target_system=0, target_component=1), 1, 191)
+
+
+def test_dispatch_answers_broadcast_mission_messages():
+    sink = _Sink()
+    gcs = mavlink.MAVLink(sink, srcSystem=255, srcComponent=190)
+    gcs.send(gcs.mission_request_list_encode(0, 0))
+    gcs.send(gcs.mission_request_list_encode(1, 0))
+    gcs.send(gcs.mission_request_list_encode(2, 0))
+    rx = MissionReceiver(Judge(), items=ITEMS)
+    answers = [dispatch(rx, msg, 0.0, system=1, component=191) for msg in mavlink.MAVLink(None).parse_buffer(sink.data)]
+    assert answers == [(Count(GCS, len(ITEMS)),), (Count(GCS, len(ITEMS)),), ()]
+
+
 # Over real UDP.
 
 class Vehicle:
@@ -411,9 +501,9 @@ def test_upload_goals_over_udp_reaches_accept_and_downloads_back(vehicle, ground
     judge = Judge()
     v = vehicle(judge)
     conn = ground(v.port)
-    upload_goals(conn, ITEMS, timeout_s=5)
+    upload_goals(conn, ITEMS)
     assert len(judge.seen) == 1 and items_to_goals(judge.seen[0]) == GOALS
-    assert items_to_goals(download_items(conn, timeout_s=5)) == GOALS
+    assert items_to_goals(download_items(conn)) == GOALS
 
 
 @pytest.mark.slow
@@ -439,7 +529,7 @@ def test_a_refusal_raises_with_the_result_name_and_reason(vehicle, ground):  # t
     v = vehicle(judge)
     conn = ground(v.port)
     with pytest.raises(MissionUploadError) as info:
-        upload_goals(conn, ITEMS, timeout_s=5)
+        upload_goals(conn, ITEMS)
     assert info.value.result == MissionResult.ERROR
     assert "refused the mission: MAV_MISSION_ERROR" in str(info.value)
     assert str(info.value).endswith(": the vehicle is armed")
@@ -447,7 +537,7 @@ def test_a_refusal_raises_with_the_result_name_and_reason(vehicle, ground):  # t
     judge.refusal = None  # the goal check alone
     with pytest.raises(MissionUploadError, match=r"MAV_MISSION_UNSUPPORTED \(command is not supported\): "
                                                  r"item 2: command 22 \(NAV_TAKEOFF\) is not a goal"):
-        upload_goals(conn, bad, timeout_s=5)
+        upload_goals(conn, bad)
     assert v.receiver.items == ()
 
 
@@ -459,7 +549,7 @@ def test_upload_and_download_survive_a_lossy_relay(vehicle, ground):  # type: ig
     goals = GOALS * 5
     try:
         conn = ground(relay.port)
-        fast = {"count_timeout_s": 0.15, "item_timeout_s": 0.05, "retries": 40, "timeout_s": 8}
+        fast = {"count_timeout_s": 0.15, "item_timeout_s": 0.05, "retries": 40}
         upload_goals(conn, goals_to_items(goals, home_lat_deg=33.45, home_lon_deg=-118.1), **fast)
         assert len(judge.seen) == 1 and items_to_goals(judge.seen[0]) == goals and v.receiver.items == judge.seen[0]
         assert items_to_goals(download_items(conn, **fast)) == goals
@@ -477,7 +567,7 @@ def test_silence_times_out(ground):  # type: ignore[no-untyped-def]
         with pytest.raises(MissionUploadError, match="no MISSION_REQUEST for item 0 after sending it 3 times") as info:
             upload_goals(conn, ITEMS, count_timeout_s=0.05, retries=2)
         assert info.value.result is None
-        with pytest.raises(MissionDownloadError, match="not complete within 0.2 s"):
-            download_items(conn, timeout_s=0.2)
+        with pytest.raises(MissionDownloadError, match="no MISSION_COUNT after 3 requests"):
+            download_items(conn, count_timeout_s=0.05, retries=2)
     finally:
         mute.close()

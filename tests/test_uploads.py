@@ -51,7 +51,8 @@ class Live:
 
     def __init__(self, forecast: Path, plan: plans.MissionPlan, log: Path, *, start: tuple[float, float],
                  mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False,
-                 speedup: float = SPEEDUP, start_depth_m: float = 0.0, **helm) -> None:  # type: ignore[no-untyped-def]
+                 speedup: float = SPEEDUP, start_depth_m: float = 0.0, replan_period_s: float | None = None,
+                 **helm) -> None:  # type: ignore[no-untyped-def]
         # The vehicle boots 6.5 h into the forecast, after issue 1's issue time (6 h): a newer
         # issue that arrives during the run is then one that exists at that time.
         self.sim = Simulator(World.load(forecast), SimConfig(start_lon_deg=start[0], start_lat_deg=start[1], port=0,
@@ -59,7 +60,8 @@ class Live:
                                                              start_depth_m=start_depth_m))
         config = ExecConfig(link=f"udpout:127.0.0.1:{self.sim.port}", log_path=log, gcs_link="udpin:127.0.0.1:0",
                             mission_path=mission, watch_dir=watch, work_dir=log.parent / "work", max_wall_s=120.0,
-                            exit_on_arrival=exit_on_arrival, linger_s=5.0, helm=HelmConfig(**helm))
+                            exit_on_arrival=exit_on_arrival, linger_s=5.0, replan_period_s=replan_period_s,
+                            helm=HelmConfig(**helm))
         try:
             self.executive = Executive(config, plan)
         except BaseException:
@@ -190,7 +192,7 @@ def test_bad_mission_items_are_refused_and_the_running_plan_goes_on(live):
     conn = live.ground_station()
     try:
         with pytest.raises(PlannerError, match="22"):
-            upload_goals(conn, items, timeout_s=5.0)
+            upload_goals(conn, items)
     finally:
         conn.close()
     assert live.executive.plan is running and live.executive.staged is None
@@ -248,12 +250,13 @@ def test_each_safety_limit_fires_its_action_on_the_vehicle(demo_plan, synthetic_
     assert any(situation in e and "plan suspended" in e for e in events), events
 
 
-def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_forecast, tmp_path):
+@pytest.mark.parametrize("second_table", ["planned on shore", "planned onboard"])
+def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_forecast, tmp_path, second_table):
     first = demo_plan.table
     mission = load_mission(DEMO)
-    lon, lat = start_west_of_goal(first, 3)
+    lon, lat = start_west_of_goal(first, 2)
     second_goal = Goal(lon_deg=lon, lat_deg=lat, depth_m=0.0)  # back where the vehicle started
-    second = _plan(synthetic_forecast, second_goal)
+    second = _plan(synthetic_forecast, second_goal) if second_table == "planned on shore" else None
     goals = (replace(mission.goals[0], on_arrival="next"), replace(mission.goals[0], goal=second_goal, on_arrival="hold"))
     plan = plans.MissionPlan(goals=goals, tables=(first, second))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0)
@@ -263,4 +266,37 @@ def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_for
     on_to = [n for n, e in enumerate(events) if "goal 0 reached: on to goal 1" in e]
     arrived = [n for n, e in enumerate(events) if e.startswith("goal reached")]
     assert len(on_to) == 1 and len(arrived) == 2 and arrived[0] < on_to[0] < arrived[1]
-    assert [w["source"] for w in rig.executive.swaps] == ["next goal"]
+    sources = [w["source"] for w in rig.executive.swaps]
+    if second is None:  # planned when goal 0 was reached, while the vehicle held there
+        assert sources == ["onboard plan (next goal)", "next goal"]
+        assert any("planning goal 1 onboard, holding" in e for e in events[arrived[0]:on_to[0]])
+    else:
+        assert sources == ["next goal"]
+
+
+def test_a_forecast_uploaded_by_ftp_is_planned_onboard_and_swapped_in(live, tmp_path):
+    from planner.synthetic import SyntheticSettings, write_synthetic
+
+    running = live.executive.table
+    blob = write_synthetic(tmp_path / "issue1.nc", SyntheticSettings(seed=0, hours=24), issue_number=1).read_bytes()
+    conn = live.ground_station()
+    try:
+        put_file(conn, blob, "/forecasts/issue1.nc", timeout_s=2.0)
+    finally:
+        conn.close()
+    assert live.wait(lambda: live.executive.swaps, 60.0), "no swap after an uploaded forecast"
+    swap = live.executive.swaps[-1]
+    assert swap["source"] == "onboard plan (new forecast issue1.nc)" and swap["forecast_identity"] != running.forecast_identity
+    assert (live.executive.config.work_dir / "forecasts" / "issue1.nc").read_bytes() == blob
+
+
+def test_replanning_on_a_period(demo_plan, synthetic_forecast, tmp_path):
+    table = demo_plan.table
+    plan = plans.MissionPlan(goals=load_mission(DEMO).goals, tables=(table,))
+    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table),
+               replan_period_s=600.0)  # 3 s of wall time at 200x
+    try:
+        assert rig.wait(lambda: len(rig.executive.swaps) >= 2, 60.0), rig.executive.swaps
+    finally:
+        rig.stop()
+    assert [w["source"] for w in rig.executive.swaps[:2]] == ["onboard plan (period)"] * 2
