@@ -56,11 +56,14 @@ class PlanResult:
 
 
 class ForecastWatcher:
-    """New ``*.nc`` files in a directory, each reported once, when it has stopped changing."""
+    """New ``*.nc`` files in a directory, each reported once, when it has stopped changing.
 
-    def __init__(self, directory: Path, *, include_existing: bool = False) -> None:
+    Files present at start are not new. A file is known by its name: a forecast written again
+    under an old name is not reported (forecast feeds name each issue anew)."""
+
+    def __init__(self, directory: Path) -> None:
         self.directory = directory
-        self._seen: set[str] = set() if include_existing else {p.name for p in self._files()}
+        self._seen = {p.name for p in self._files()}  # already there: the running plan knows them
         self._sizes: dict[str, tuple[int, int]] = {}
 
     def _files(self) -> list[Path]:
