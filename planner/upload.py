@@ -13,6 +13,8 @@ logged); a refused part never replaces the running plan. Any refusal here exits 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import os
 import sys
 import tempfile
@@ -53,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
         for n, goal in enumerate(mission.goals):
             if n not in blobs:
                 say(f"planning goal {n} on shore")
-                blobs[n] = _plan_goal(args.mission, goal.goal, args.forecast, Path(tmp) / f"goal-{n}.lrpt")
+                with contextlib.redirect_stdout(io.StringIO()) if args.quiet else contextlib.nullcontext():
+                    blobs[n] = _plan_goal(args.mission, goal.goal, args.forecast, Path(tmp) / f"goal-{n}.lrpt")
         conn = _connect(args.to)
         try:
             _send(conn, mission, blobs, args, say)
