@@ -112,7 +112,7 @@ def _exec(args: argparse.Namespace) -> int:
                           "link": args.link, "gcs": args.gcs or "", "mission": str(args.mission or ""),
                           "forecast_identity": table.forecast_identity, "forecast_time": table.forecast_time or ""}}
     try:
-        executive = Executive(config, plan, table_bytes=blobs[tables.index(table)], metadata=meta)
+        executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta)
     except OSError as exc:
         raise PlannerError(f"--link {args.link} or --gcs {args.gcs}: cannot open: {exc}") from None
     stop = threading.Event()

@@ -21,8 +21,10 @@ why DRIFT and the glides (which drift along ``w``, spec section 5) use ALT_HOLD.
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Any
 
 from executive.state import (
     Arm,
@@ -83,6 +85,21 @@ class HelmConfig:
     on_breach: BreachAction = "surface"  # for every safety limit and link loss (docs/missions.md)
     rates: tuple[tuple[str, float], ...] = DEFAULT_RATES
 
+    def to_json(self) -> str:
+        """The settings as JSON, for the log (the decision audit runs the helm again with them)."""
+        return json.dumps(asdict(self), separators=(",", ":"))
+
+    @classmethod
+    def from_json(cls, text: str) -> HelmConfig:
+        """Inverse of ``to_json``; keys this version does not know are ignored, missing ones defaulted."""
+        data = json.loads(text)
+        known = {f.name for f in fields(cls)}
+        values = {k: v for k, v in data.items() if k in known}
+        for key in ("geofence", "rates"):  # JSON arrays back to the tuples the dataclass holds
+            if values.get(key) is not None:
+                values[key] = tuple(tuple(p) for p in values[key])
+        return cls(**values)
+
 
 @dataclass(frozen=True, slots=True)
 class Activity:
@@ -129,6 +146,15 @@ class Decision:
     action: Action | None
     mode: SubMode
     changed: bool  # a new activity started on this update
+
+    def to_record(self) -> dict[str, Any]:
+        """The ``/executive/decision`` payload (enums by name or value, as JSON holds them)."""
+        return {
+            "time_s": self.time_s, "lat_deg": self.lat_deg, "lon_deg": self.lon_deg, "depth_m": self.depth_m,
+            "heading_deg": self.heading_deg, "cell": list(self.cell) if self.cell is not None else None,
+            "situation": self.situation.value, "action": self.action.name if self.action is not None else None,
+            "mode": self.mode.name, "changed": self.changed,
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -185,6 +211,12 @@ def step(
         changed=changed,
     )
     return Tick(helm, tuple(out.commands), tuple(out.events), decision)
+
+
+def swapped(helm: HelmState) -> HelmState:
+    """The helm as a new table takes over: no activity, so the next decision starts afresh."""
+    phase = Phase.RUNNING if helm.phase is Phase.ARRIVED else helm.phase
+    return replace(helm, phase=phase, activity=None, target_sent_s=None, mode_request_s=None)
 
 
 # -- phases -------------------------------------------------------------------------

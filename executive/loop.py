@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import select
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from typing import Any
 from executive import mavlink_bridge as bridge
 from executive import plans
 from executive.clock import VehicleClock
-from executive.helm import Decision, HelmConfig, HelmState, step
+from executive.helm import Decision, HelmConfig, HelmState, step, swapped
 from executive.latency import LatencyHistogram
 from executive.plans import MissionPlan
 from executive.recorder import Recorder, Topic
@@ -85,7 +86,8 @@ class RunSummary:
 class Executive:
     """Runs the helm against a live MAVLink link until told to stop or the mission ends."""
 
-    def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *, table_bytes: bytes | None = None,
+    def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *,
+                 table_bytes: Mapping[int, bytes] | None = None,
                  metadata: dict[str, dict[str, str]] | None = None) -> None:
         from pymavlink import mavutil  # transport only; encoding and parsing are the bridge's
 
@@ -131,10 +133,16 @@ class Executive:
         self._latest_forecast: Path | None = None
         self._last_plan_s: float | None = None
         self._asked_next: int | None = None
+        # What the decision audit (executive.audit) needs to run the helm again: its settings,
+        # the active goal and every table's exact bytes.
+        self.recorder.metadata("helm", {"config": self.helm_config.to_json(),
+                                        "goal_index": str(self.plan.index if self.plan is not None else 0)})
         if self.plan is not None and self.plan.table is not None:
-            for table_n in self.plan.tables:
+            blobs = table_bytes or {}
+            for index, table_n in enumerate(self.plan.tables):
                 if table_n is not None:
-                    self._record_policy(table_n, table_bytes if table_n is self.plan.table else None, "loaded")
+                    self._record_policy(table_n, blobs.get(table_n.crc32) or table_n.to_bytes(), "loaded",
+                                        goal_index=index)
         else:
             self._event(0.0, Event("error", "no policy table: the vehicle will be surfaced"))
 
@@ -314,7 +322,7 @@ class Executive:
             self._send_command(now_s, cmd)
         if tick.decision is not None:
             self._counts["decisions"] += 1
-            self._log(self.recorder.write, Topic.DECISION, now_s, _decision_payload(tick.decision))
+            self._log(self.recorder.write, Topic.DECISION, now_s, tick.decision.to_record())
         if self.helm.phase is Phase.ARRIVED:
             self._arrived(now_s)
 
@@ -356,12 +364,13 @@ class Executive:
         old, old_table = self.plan, self.table
         self.plan = new
         self.helm_config = self._config_for(new)
-        if new.table is not old_table:
-            phase = Phase.RUNNING if self.helm.phase is Phase.ARRIVED else self.helm.phase
-            self.helm = replace(self.helm, phase=phase, activity=None, target_sent_s=None, mode_request_s=None)
+        reset = new.table is not old_table
+        if reset:
+            self.helm = swapped(self.helm)
         if old is None or new.goals != old.goals:
             self._arrival_s, self._asked_next = None, None  # a new mission
         record = {"time_s": now_s, "reason": "swapped", **note, "goal_index": new.index,
+                  "on_arrival": self.helm_config.on_arrival, "helm_reset": reset,
                   "previous": plans.identity(old_table), **plans.identity(new.table)}
         if new.table is not None:
             record["forecast"] = {"identity": new.table.forecast_identity, "time": new.table.forecast_time}
@@ -529,13 +538,17 @@ class Executive:
             self.recorder.location_fix(now_s, lat_deg=v.lat_deg, lon_deg=v.lon_deg, depth_m=v.depth_m)  # type: ignore[arg-type]
         self.recorder.write(Topic.STATE, now_s, {name: getattr(v, name) for name in _STATE_FIELDS})
 
-    def _record_policy(self, table: PolicyTable, table_bytes: bytes | None, reason: str, *, now_s: float = 0.0) -> None:
+    def _record_policy(self, table: PolicyTable, table_bytes: bytes | None, reason: str, *, now_s: float = 0.0,
+                       goal_index: int | None = None) -> None:
         header = table.header()
-        self.recorder.write(Topic.POLICY, now_s, {
+        record = {
             "time_s": now_s, "reason": reason, "table_crc32": f"{table.crc32:08x}",
             "forecast": header.get("forecast", {}), "grid": header.get("grid", {}), "goal": header.get("goal", {}),
             "model": header.get("model"), "criterion": header.get("criterion"),
-        })
+        }
+        if goal_index is not None:
+            record["goal_index"] = goal_index
+        self.recorder.write(Topic.POLICY, now_s, record)
         if table_bytes is not None:
             self.recorder.attach(f"policy-{table.crc32:08x}.lrpt", table_bytes)
 
@@ -607,12 +620,3 @@ class Executive:
             decision_p99_us=self.decision_latency.percentile_us(99),
             message_p99_us=self.message_cost.percentile_us(99),
         )
-
-
-def _decision_payload(d: Decision) -> dict[str, Any]:
-    return {
-        "time_s": d.time_s, "lat_deg": d.lat_deg, "lon_deg": d.lon_deg, "depth_m": d.depth_m,
-        "heading_deg": d.heading_deg, "cell": list(d.cell) if d.cell is not None else None,
-        "situation": d.situation.value, "action": d.action.name if d.action is not None else None,
-        "mode": d.mode.name, "changed": d.changed,
-    }

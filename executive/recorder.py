@@ -39,7 +39,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 from planner.atomic import atomic_target
 from planner.errors import PlannerError
 
-__all__ = ["LogError", "LogLevel", "Recorder", "Recovery", "Topic", "read_messages", "recover"]
+__all__ = ["LogError", "LogLevel", "RecordStream", "Recorder", "Recovery", "Topic", "check_head", "read_messages", "recover"]
 
 _MAGIC = b"\x89MCAP0\r\n"  # MCAP spec, "Magic"
 _FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
@@ -506,7 +506,7 @@ _NO_COVARIANCE = (0.0,) * 9
 # -- reading -----------------------------------------------------------------------------
 
 
-def _check_head(path: Path, head: bytes) -> None:
+def check_head(path: Path, head: bytes) -> None:
     if not head:
         raise LogError(f"{path}: empty file (0 bytes); not an MCAP log")
     if len(head) < len(_MAGIC) and _MAGIC.startswith(head):
@@ -535,7 +535,7 @@ def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = N
     p = Path(path)
     try:
         with open(p, "rb") as f:
-            _check_head(p, f.read(len(_MAGIC)))
+            check_head(p, f.read(len(_MAGIC)))
             complete = _has_footer(f, os.fstat(f.fileno()).st_size)
     except OSError as exc:
         raise LogError(f"{p}: cannot read: {exc.strerror or exc}") from None
@@ -596,7 +596,7 @@ def recover(src: str | os.PathLike[str], dst: str | os.PathLike[str] | None = No
         raise LogError(f"{source}: cannot read: {exc.strerror or exc}") from None
     with f:
         size = os.fstat(f.fileno()).st_size
-        _check_head(source, f.read(len(_MAGIC)))
+        check_head(source, f.read(len(_MAGIC)))
         f.seek(0)
         try:
             with atomic_target(output) as tmp, open(tmp, "wb") as out:
@@ -606,61 +606,82 @@ def recover(src: str | os.PathLike[str], dst: str | os.PathLike[str] | None = No
     return Recovery(source=str(source), output=str(output), **result)
 
 
+class RecordStream:
+    """Every complete record of an MCAP file in file order, chunks opened, stopping at the first bad one.
+
+    Iterate it for Header, Schema, Channel, Message, Attachment and Metadata records
+    (the summary section after DataEnd is skipped: it only repeats schemas and
+    channels). Afterwards ``complete`` says whether the file ended with its footer and
+    closing magic, ``end_byte`` where the last complete record ended, and
+    ``chunks_dropped`` how many chunks failed their CRC or decompression.
+    """
+
+    def __init__(self, f: BinaryIO, size: int) -> None:
+        self._f = f
+        self._size = size
+        self.complete = False
+        self.end_byte = len(_MAGIC)
+        self.chunks_dropped = 0
+
+    def __iter__(self) -> Iterator[Any]:
+        # A record cannot be longer than the file: this bounds what a garbage length can
+        # make the reader allocate (foxglove/mcap #1220, MemoryError on truncated files).
+        records = StreamReader(self._f, emit_chunks=True, validate_crcs=True, record_size_limit=self._size).records
+        data_ended = False
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:  # the closing magic was read after the footer
+                self.complete = True
+                return
+            except (McapError, ValueError, struct.error):
+                return  # cut off (EndOfFile), a garbage length, or a bad CRC: keep what came before
+            self.end_byte = self._f.tell()
+            if isinstance(record, DataEnd | Footer):
+                data_ended = True
+                continue
+            if data_ended:
+                continue
+            if isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except Exception:  # noqa: BLE001 - untrusted bytes: any decompressor or parse error drops the chunk
+                    self.chunks_dropped += 1
+                    continue
+                yield from inner
+            else:
+                yield record
+
+
 def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[str, Any]:
-    # A record cannot be longer than the file: this bounds what a garbage length can
-    # make the reader allocate (foxglove/mcap #1220, MemoryError on truncated files).
-    records = StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=size).records
+    stream = RecordStream(f, size)
     writer: Writer | None = None
     schema_ids: dict[int, int] = {0: 0}
     channel_ids: dict[int, int] = {}
-    messages, dropped, last_ns = 0, 0, None
-    data_ended = complete = False
-    good_end = len(_MAGIC)
-    while True:
-        try:
-            record = next(records)
-        except StopIteration:  # the closing magic was read after the footer
-            complete = True
-            break
-        except (McapError, ValueError, struct.error):
-            break  # cut off (EndOfFile), a garbage length, or a bad CRC: keep what came before
-        good_end = f.tell()
-        if isinstance(record, Header):
+    messages, last_ns = 0, None
+    for r in stream:
+        if isinstance(r, Header):
             writer = Writer(out, chunk_size=1024 * 1024, compression=_COMPRESSION, enable_crcs=True)
-            writer.start(record.profile, f"{record.library} (recovered by {_LIBRARY})")
+            writer.start(r.profile, f"{r.library} (recovered by {_LIBRARY})")
             continue
         if writer is None:
-            raise LogError(f"{source}: the first record is a {type(record).__name__}, not a Header; cannot recover")
-        if isinstance(record, DataEnd | Footer):
-            data_ended = True  # the summary section only repeats schemas and channels
-            continue
-        if data_ended:
-            continue
-        if isinstance(record, Chunk):
-            try:
-                inner = breakup_chunk(record, validate_crc=True)
-            except Exception:  # noqa: BLE001 - untrusted bytes: any decompressor or parse error drops the chunk
-                dropped += 1
-                continue
-        else:
-            inner = [record]
-        for r in inner:
-            if isinstance(r, Message):
-                channel_id = channel_ids.get(r.channel_id)
-                if channel_id is None:
-                    continue  # its Channel record was lost with a dropped chunk
-                writer.add_message(channel_id, r.log_time, r.data, r.publish_time, r.sequence)
-                messages += 1
-                last_ns = r.log_time if last_ns is None else max(last_ns, r.log_time)
-            elif isinstance(r, Schema) and r.id not in schema_ids:
-                schema_ids[r.id] = writer.register_schema(r.name, r.encoding, r.data)
-            elif isinstance(r, Channel) and r.id not in channel_ids and r.schema_id in schema_ids:
-                channel_ids[r.id] = writer.register_channel(r.topic, r.message_encoding, schema_ids[r.schema_id],
-                                                            dict(r.metadata))
-            elif isinstance(r, Attachment):
-                writer.add_attachment(r.create_time, r.log_time, r.name, r.media_type, r.data)
-            elif isinstance(r, Metadata):
-                writer.add_metadata(r.name, dict(r.metadata))
+            raise LogError(f"{source}: the first record is a {type(r).__name__}, not a Header; cannot recover")
+        if isinstance(r, Message):
+            channel_id = channel_ids.get(r.channel_id)
+            if channel_id is None:
+                continue  # its Channel record was lost with a dropped chunk
+            writer.add_message(channel_id, r.log_time, r.data, r.publish_time, r.sequence)
+            messages += 1
+            last_ns = r.log_time if last_ns is None else max(last_ns, r.log_time)
+        elif isinstance(r, Schema) and r.id not in schema_ids:
+            schema_ids[r.id] = writer.register_schema(r.name, r.encoding, r.data)
+        elif isinstance(r, Channel) and r.id not in channel_ids and r.schema_id in schema_ids:
+            channel_ids[r.id] = writer.register_channel(r.topic, r.message_encoding, schema_ids[r.schema_id],
+                                                        dict(r.metadata))
+        elif isinstance(r, Attachment):
+            writer.add_attachment(r.create_time, r.log_time, r.name, r.media_type, r.data)
+        elif isinstance(r, Metadata):
+            writer.add_metadata(r.name, dict(r.metadata))
     if writer is None:
         raise LogError(f"{source}: truncated before the end of the MCAP header ({size} bytes); nothing to recover")
     writer.finish()
@@ -668,7 +689,7 @@ def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[s
         "messages": messages,
         "channels": len(channel_ids),
         "last_log_time_s": None if last_ns is None else last_ns / _NS_PER_S,
-        "complete": complete,
-        "truncated_at_byte": None if complete else good_end,
-        "chunks_dropped": dropped,
+        "complete": stream.complete,
+        "truncated_at_byte": None if stream.complete else stream.end_byte,
+        "chunks_dropped": stream.chunks_dropped,
     }

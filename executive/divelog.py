@@ -1,0 +1,161 @@
+"""A dive's MCAP log opened for replay: what it holds, and its messages in the order they were written.
+
+The executive writes one log per run (``executive.recorder``). Replay reads it
+record by record (``recorder.RecordStream``) rather than through the index, so a
+log left by a killed writer replays up to its last complete record, and
+``DiveLog`` says where it ends. Messages come in file order, which is the order
+the executive did things in (log times are vehicle time and may step back at a
+reboot). Channels this version does not know are counted and skipped, never
+guessed at.
+
+Standard library and ``mcap`` only, like the recorder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+from mcap.records import Attachment, Channel, Header, Message, Metadata
+
+from executive.recorder import LogError, RecordStream, Topic, check_head
+
+__all__ = ["DiveLog", "LogMessage", "open_dive"]
+
+_NS_PER_S = 1_000_000_000
+_KNOWN = {t.value: t for t in Topic}
+
+
+@dataclass(frozen=True, slots=True)
+class LogMessage:
+    """One message of a known topic, decoded."""
+
+    topic: Topic
+    log_time_s: float  # vehicle time since boot
+    publish_time_s: float  # wall clock (Unix seconds) when it was written
+    payload: dict[str, Any]
+
+
+@dataclass(frozen=True, kw_only=True)
+class DiveLog:
+    """What one pass over a log found; ``messages()`` reads it again for the payloads."""
+
+    path: Path
+    size_bytes: int
+    library: str
+    profile: str
+    complete: bool  # ended with a footer: the writer closed it
+    end_byte: int  # end of the last complete record (== size_bytes when complete)
+    chunks_dropped: int  # chunks whose CRC or compression was broken
+    counts: Mapping[Topic, int]  # messages per known topic
+    unknown: Mapping[str, int]  # messages on topics (or encodings) this version does not read
+    first_log_time_s: float | None
+    last_log_time_s: float | None
+    metadata: Mapping[str, Mapping[str, str]]
+    attachments: Mapping[str, bytes]
+
+    @property
+    def n_messages(self) -> int:
+        return sum(self.counts.values())
+
+    def where_it_ends(self) -> str:
+        """One line for the operator: complete, or where the cut is."""
+        if self.complete:
+            return f"complete ({self.size_bytes:,} bytes)"
+        last = "no messages" if self.last_log_time_s is None else f"vehicle time {self.last_log_time_s:.1f} s"
+        return (f"TRUNCATED: the writer did not finish (killed?); read up to byte {self.end_byte:,} of"
+                f" {self.size_bytes:,}, the last complete message at {last}")
+
+    def messages(self, topics: Iterable[Topic] | None = None) -> Iterator[LogMessage]:
+        """The messages on ``topics`` (default all known ones), in file order."""
+        wanted = set(Topic) if topics is None else set(topics)
+        for channel, message in _stream_messages(self.path):
+            topic = _KNOWN.get(channel.topic)
+            if topic is None or topic not in wanted or channel.message_encoding != "json":
+                continue
+            try:
+                payload = json.loads(message.data)
+            except ValueError as exc:
+                raise LogError(f"{self.path}: {channel.topic}: message {message.sequence} is not JSON ({exc})") from None
+            yield LogMessage(topic, message.log_time / _NS_PER_S, message.publish_time / _NS_PER_S, payload)
+
+
+def open_dive(path: str | os.PathLike[str]) -> DiveLog:
+    """Read ``path`` once through: header, channels, counts, metadata, attachments, where it ends.
+
+    Raises ``LogError`` for a file that is missing, not MCAP, or has no lrauv channel.
+    """
+    p = Path(path)
+    counts: dict[Topic, int] = {}
+    unknown: dict[str, int] = {}
+    metadata: dict[str, dict[str, str]] = {}
+    attachments: dict[str, bytes] = {}
+    channels: dict[int, tuple[Topic | None, str]] = {}
+    header: Header | None = None
+    first = last = None
+    with _open(p) as f:
+        size = os.fstat(f.fileno()).st_size
+        stream = RecordStream(f, size)
+        for r in stream:
+            if isinstance(r, Header):
+                header = r
+            elif isinstance(r, Channel):
+                topic = _KNOWN.get(r.topic) if r.message_encoding == "json" else None
+                channels[r.id] = (topic, r.topic if topic is not None else f"{r.topic} ({r.message_encoding})")
+            elif isinstance(r, Message):
+                topic, name = channels.get(r.channel_id, (None, f"channel {r.channel_id} (no Channel record)"))
+                if topic is None:
+                    unknown[name] = unknown.get(name, 0) + 1
+                    continue
+                counts[topic] = counts.get(topic, 0) + 1
+                t = r.log_time / _NS_PER_S
+                first = t if first is None else first
+                last = t
+            elif isinstance(r, Metadata):
+                metadata[r.name] = dict(r.metadata)
+            elif isinstance(r, Attachment):
+                attachments[r.name] = bytes(r.data)
+    if header is None:
+        raise LogError(f"{p}: truncated inside the MCAP header ({size} bytes); nothing to replay")
+    if not counts and not stream.complete and not unknown:
+        raise LogError(f"{p}: truncated at byte {stream.end_byte:,} of {size:,}, before the first message"
+                       " (the writer was killed at once?); nothing to replay")
+    if not counts:
+        seen = ", ".join(f"{name} ({n})" for name, n in unknown.items()) or "none"
+        raise LogError(f"{p}: no lrauv executive channel in this MCAP file (library {header.library!r});"
+                       f" expected topics like {Topic.DECISION.value}; channels seen: {seen}")
+    return DiveLog(path=p, size_bytes=size, library=header.library, profile=header.profile, complete=stream.complete,
+                   end_byte=size if stream.complete else stream.end_byte, chunks_dropped=stream.chunks_dropped,
+                   counts=counts, unknown=unknown, first_log_time_s=first, last_log_time_s=last, metadata=metadata,
+                   attachments=attachments)
+
+
+def _open(p: Path) -> BinaryIO:
+    """The log opened for reading, its magic checked."""
+    try:
+        f = open(p, "rb")  # noqa: SIM115 (the caller closes it)
+    except OSError as exc:
+        raise LogError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    try:
+        check_head(p, f.read(8))
+    except LogError:
+        f.close()
+        raise
+    f.seek(0)
+    return f
+
+
+def _stream_messages(p: Path) -> Iterator[tuple[Channel, Message]]:
+    channels: dict[int, Channel] = {}
+    with _open(p) as f:
+        for r in RecordStream(f, os.fstat(f.fileno()).st_size):
+            if isinstance(r, Channel):
+                channels[r.id] = r
+            elif isinstance(r, Message):
+                channel = channels.get(r.channel_id)
+                if channel is not None:
+                    yield channel, r
