@@ -302,7 +302,7 @@ def _dim_role(ds: xr.Dataset, dim: str) -> str | None:
 # --------------------------------------------------------------------------------------
 
 
-def _file_identity(path: Path, label: str) -> str:
+def file_identity(path: Path, label: str | None = None) -> str:
     """``sha256:`` + the first 16 hex characters of the SHA-256 of the file's bytes."""
     digest = hashlib.sha256()
     try:
@@ -311,7 +311,7 @@ def _file_identity(path: Path, label: str) -> str:
                 digest.update(block)
     except OSError as exc:
         raise ForecastError(
-            f"{label}: cannot read the file ({exc.strerror or exc}); check the path and permissions"
+            f"{label or path}: cannot read the file ({exc.strerror or exc}); check the path and permissions"
         ) from exc
     return "sha256:" + digest.hexdigest()[:16]
 
@@ -366,7 +366,7 @@ def open_forecast(
     grid_ds: xr.Dataset | None = None
     grid_label: str | None = None
     try:
-        identity = _file_identity(p, label)
+        identity = file_identity(p, label)
         if grid_file is not None:
             grid_ds, grid_label, _ = _open_dataset(grid_file, "grid file")
         ctx = _Context(ds=ds, label=label, grid_ds=grid_ds, grid_label=grid_label)
