@@ -5,11 +5,16 @@ PY     := $(VENV)/bin/python
 LRAUV  := $(VENV)/bin/lrauv
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo
+# The TypeScript MCAP reader (@mcap/core) that tests/test_mcap_node.py reads the logs with; installed
+# from tests/node/package-lock.json when node and npm are on PATH, else those tests skip.
+NODE_DIR   := tests/node
+NODE_STAMP := $(NODE_DIR)/node_modules/.installed
+HAVE_NODE  := $(shell command -v node >/dev/null 2>&1 && command -v npm >/dev/null 2>&1 && echo yes)
 # Where the demo vehicle starts (LON,LAT): open water 16 km west-south-west of the goal.
 DEMO_START ?= -117.96,33.34
 DEMO_SPEEDUP ?= 1000
 
-.PHONY: demo test bench clean sysdeps
+.PHONY: demo test node bench clean sysdeps
 
 # System packages: a Python >= 3.11 with venv and pip (Debian: python3-venv).
 sysdeps:
@@ -34,7 +39,21 @@ demo: $(STAMP)
 	$(LRAUV) demo --mission missions/demo.yaml --table $(OUT)/demo.lrpt --truth $(OUT)/truth.nc \
 	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --out $(OUT)
 
-test: $(STAMP)
+# The stamp lives in node_modules: deleting node_modules, or a newer package.json or lock, reinstalls.
+# An install that fails (no registry) removes what it left, warns, and the Node tests skip.
+$(NODE_STAMP): $(NODE_DIR)/package.json $(NODE_DIR)/package-lock.json
+	@echo "npm ci --prefix $(NODE_DIR) --no-audit --no-fund"
+	@if npm ci --prefix $(NODE_DIR) --no-audit --no-fund; then touch $@; else rm -rf $(NODE_DIR)/node_modules; \
+	  echo "WARNING: npm ci failed: @mcap/core is not installed and tests/test_mcap_node.py will skip"; fi
+
+ifeq ($(HAVE_NODE),yes)
+node: $(NODE_STAMP)
+else
+node:
+	@echo "node or npm not on PATH: not installing @mcap/core; tests/test_mcap_node.py will skip"
+endif
+
+test: $(STAMP) node
 	$(PY) -m pytest
 
 bench: $(STAMP)
