@@ -18,8 +18,9 @@ from numpy.typing import NDArray
 
 from executive.divelog import DiveLog
 from executive.recorder import LogLevel, Topic
+from planner.headings import EARTH_RADIUS_M
 
-__all__ = ["Dive", "Event", "Track", "load_dive"]
+__all__ = ["Dive", "Event", "Segment", "Track", "load_dive", "path_length_m"]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -39,9 +40,46 @@ class Track:
     energy_used_wh: NDArray[np.float64]  # the latest BATTERY_STATUS figure at that time
     battery_pct: NDArray[np.float64]
     goal_index: NDArray[np.int64]  # the active goal of the mission
+    changed: NDArray[np.bool_]  # a new activity started at this decision
+    table_crc32: tuple[str | None, ...]  # the table in use (hex CRC), None with none
 
     def __len__(self) -> int:
         return int(self.time_s.size)
+
+    def segments(self) -> list[Segment]:
+        """Stretches of rows under one table and goal, in order (a new one at every swap)."""
+        out: list[Segment] = []
+        start = 0
+        for row in range(1, len(self) + 1):
+            if row == len(self) or (self.table_crc32[row], self.goal_index[row]) != (
+                    self.table_crc32[start], self.goal_index[start]):
+                out.append(Segment(start, row, self.table_crc32[start], int(self.goal_index[start])))
+                start = row
+        return out
+
+    def distance_m(self) -> float:
+        """Distance over ground along the positions, great circles between rows (spec section 1 radius)."""
+        return path_length_m(self.lat_deg, self.lon_deg)
+
+
+@dataclass(frozen=True, slots=True)
+class Segment:
+    """Rows ``start`` to ``stop`` (exclusive) of a track, driven by one table towards one goal."""
+
+    start: int
+    stop: int
+    table_crc32: str | None
+    goal_index: int
+
+
+def path_length_m(lat_deg: NDArray[np.float64], lon_deg: NDArray[np.float64]) -> float:
+    """Sum of haversine distances between consecutive finite points, in metres."""
+    ok = np.isfinite(lat_deg) & np.isfinite(lon_deg)
+    lat, lon = np.radians(lat_deg[ok]), np.radians(lon_deg[ok])
+    if lat.size < 2:
+        return 0.0
+    a = np.sin(np.diff(lat) / 2) ** 2 + np.cos(lat[:-1]) * np.cos(lat[1:]) * np.sin(np.diff(lon) / 2) ** 2
+    return float(np.sum(2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.minimum(a, 1.0)))))
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,11 +109,13 @@ _LEVEL_NAMES = {int(v): v.name.lower() for v in LogLevel}
 def load_dive(log: DiveLog) -> Dive:
     """Read the decisions, vehicle states, policy records and events of ``log`` in one pass."""
     rows: dict[str, list[Any]] = {k: [] for k in ("time_s", "wall_s", "lat_deg", "lon_deg", "depth_m", "heading_deg",
-                                                 "situation", "action", "mode", "cell", "energy", "battery", "goal")}
+                                                 "situation", "action", "mode", "cell", "energy", "battery", "goal",
+                                                 "changed", "table")}
     policy: list[dict[str, Any]] = []
     events: list[Event] = []
     energy = battery = math.nan
     goal = int(log.metadata.get("helm", {}).get("goal_index", "0"))
+    table: str | None = None
     states = 0
     offset: float | None = None
     topics = (Topic.DECISION, Topic.STATE, Topic.POLICY, Topic.LOG, Topic.MAVLINK_RX)
@@ -98,14 +138,18 @@ def load_dive(log: DiveLog) -> Dive:
             rows["energy"].append(energy)
             rows["battery"].append(battery)
             rows["goal"].append(goal)
+            rows["changed"].append(bool(p.get("changed")))
+            rows["table"].append(table)
         elif m.topic is Topic.STATE:
             states += 1
             energy = _num(p.get("energy_used_wh"), energy)
             battery = _num(p.get("battery_pct"), battery)
         elif m.topic is Topic.POLICY:
             policy.append(p)
-            if p.get("reason") == "swapped" and isinstance(p.get("goal_index"), int):
-                goal = p["goal_index"]
+            reason = p.get("reason")
+            if reason == "swapped" or (reason == "loaded" and table is None and p.get("goal_index", 0) == goal):
+                goal = p["goal_index"] if isinstance(p.get("goal_index"), int) else goal
+                table = p.get("table_crc32")
         else:
             events.append(Event(m.log_time_s, _LEVEL_NAMES.get(p.get("level"), "unknown"), str(p.get("message", ""))))
     f64 = np.float64
@@ -116,7 +160,8 @@ def load_dive(log: DiveLog) -> Dive:
         situation=tuple(rows["situation"]), action=tuple(rows["action"]), mode=tuple(rows["mode"]),
         cell=np.asarray(rows["cell"], np.int64).reshape(-1, 4),
         energy_used_wh=np.asarray(rows["energy"], f64), battery_pct=np.asarray(rows["battery"], f64),
-        goal_index=np.asarray(rows["goal"], np.int64),
+        goal_index=np.asarray(rows["goal"], np.int64), changed=np.asarray(rows["changed"], bool),
+        table_crc32=tuple(rows["table"]),
     )
     return Dive(log=log, track=track, policy=tuple(policy), events=tuple(events), states=states, unix_offset_s=offset)
 

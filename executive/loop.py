@@ -26,7 +26,7 @@ from typing import Any
 from executive import mavlink_bridge as bridge
 from executive import plans
 from executive.clock import VehicleClock
-from executive.helm import Decision, HelmConfig, HelmState, step, swapped
+from executive.helm import HelmConfig, HelmState, step, swapped
 from executive.latency import LatencyHistogram
 from executive.plans import MissionPlan
 from executive.recorder import Recorder, Topic

@@ -79,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     from vehicle_sim.cli import add_parser as add_sim
     from vehicle_sim.demo import add_parser as add_demo
 
+    from planner.replay_cli import add_parser as add_replay
     from planner.upload import add_parser as add_upload
     from planner.waypoints_cli import add_parser as add_waypoints
 
@@ -87,6 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_demo(sub)
     add_upload(sub)
     add_waypoints(sub)
+    add_replay(sub)
     return parser
 
 
@@ -118,6 +120,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from planner.waypoints_cli import run as run_waypoints
 
             return run_waypoints(args)
+        if args.command == "replay":
+            from planner.replay_cli import run as run_replay
+
+            return run_replay(args)
     except PlannerError as exc:
         print(f"lrauv: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

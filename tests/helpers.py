@@ -45,3 +45,18 @@ def sim_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[st
     """``python -m vehicle_sim ARGS`` run to completion, output captured."""
     return subprocess.run([sys.executable, "-m", "vehicle_sim", *args], capture_output=True, text=True, check=False,
                           timeout=timeout, cwd=REPO)
+
+
+def audit_log(path: Path):  # type: ignore[no-untyped-def]
+    """The decision audit of a finished executive log (``lrauv replay``'s): ``AuditResult``."""
+    from executive.audit import audit
+    from executive.divelog import open_dive
+
+    return audit(open_dive(path))
+
+
+def assert_audit_clean(path: Path) -> None:
+    """Every logged decision is made again, the same, by ``helm.step`` on the logged inputs."""
+    result = audit_log(path)
+    assert result.decisions > 0, f"{path}: no decision to audit"
+    assert result.clean, "\n".join(m.describe() for m in result.mismatches[:10])

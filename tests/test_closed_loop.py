@@ -29,7 +29,7 @@ from executive.state import SubMode  # noqa: E402
 from vehicle_sim.cli import wait_ready  # noqa: E402
 from vehicle_sim.demo import stop_process  # noqa: E402
 
-from tests.helpers import start_west_of_goal, wait_until  # noqa: E402
+from tests.helpers import assert_audit_clean, start_west_of_goal, wait_until  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 LRAUV = [sys.executable, "-m", "planner.cli"]
@@ -180,6 +180,7 @@ def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
     assert track["energy_used_wh"][-1] > 0
     decisions = [p for _, _, p in read_messages(result.log_path, ["/executive/decision"])]
     assert {d["action"] for d in decisions} >= {"FORWARD", "AT_GOAL"}
+    assert_audit_clean(result.log_path)
 
 
 def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan, synthetic_forecast, tmp_path):
@@ -201,6 +202,7 @@ def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan,
     # No decision went back in time although datagrams came twice and out of order.
     times = [p["time_s"] for _, _, p in read_messages(tmp_path / "lossy.mcap", ["/executive/decision"])]
     assert times == sorted(times)
+    assert_audit_clean(tmp_path / "lossy.mcap")  # stale and duplicated datagrams are dropped again the same way
 
 
 def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synthetic_forecast, tmp_path):
@@ -240,3 +242,4 @@ def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, syntheti
     logs = [p["message"] for _, _, p in read_messages(tmp_path / "silent.mcap", ["/log"])]
     assert any(m.startswith("link lost") for m in logs), logs
     assert summary is not None
+    assert_audit_clean(tmp_path / "silent.mcap")  # link loss and its recovery run again the same way

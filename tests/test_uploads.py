@@ -34,7 +34,7 @@ from planner.waypoints import goals_to_items  # noqa: E402
 from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
-from tests.helpers import DEMO_MISSION, plan_for, start_west_of_goal, wait_until  # noqa: E402
+from tests.helpers import DEMO_MISSION, assert_audit_clean, plan_for, start_west_of_goal, wait_until  # noqa: E402
 
 DEMO = DEMO_MISSION
 SPEEDUP = 200.0
@@ -73,6 +73,7 @@ class Live:
         self._sim_thread.start()
         self._stop = threading.Event()
         self.summary = None
+        self._audited = False
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
@@ -99,6 +100,9 @@ class Live:
         self._sim_thread.join(timeout=10)
         self.sim.close()
         assert not self._thread.is_alive() and not self._sim_thread.is_alive()
+        if self.summary is not None and not self._audited:  # every run here is also a decision-audit case
+            self._audited = True
+            assert_audit_clean(self.executive.config.log_path)
         return self.summary
 
 
