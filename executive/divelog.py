@@ -114,7 +114,7 @@ def open_dive(path: str | os.PathLike[str]) -> DiveLog:
                 header = r
             elif isinstance(r, Channel):
                 topic = _KNOWN.get(r.topic) if r.message_encoding == "json" else None
-                channels[r.id] = (topic, r.topic if topic is not None else f"{r.topic} ({r.message_encoding})")
+                channels[r.id] = (topic, r.topic if r.message_encoding == "json" else f"{r.topic} ({r.message_encoding})")
             elif isinstance(r, Message):
                 topic, name = channels.get(r.channel_id, (None, f"channel {r.channel_id} (no Channel record)"))
                 if topic is None:

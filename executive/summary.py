@@ -84,13 +84,15 @@ def summarise(dive: Dive, *, nominal: Mapping[int, Polyline] | None = None, nomi
     tr = dive.track
     n = len(tr)
     labels = [a if a is not None else s.upper() for a, s in zip(tr.action, tr.situation)]
-    dt = np.diff(tr.time_s, append=tr.time_s[-1] if n else 0.0)
+    # Position and attitude decisions interleave slightly out of time order, and a reboot steps
+    # time back: durations are steps of the running latest time, so they add up to the span.
+    latest = np.maximum.accumulate(tr.time_s) if n else tr.time_s
+    dt = np.diff(latest, append=latest[-1] if n else 0.0)
     de = np.diff(tr.energy_used_wh, append=tr.energy_used_wh[-1] if n else 0.0)
     time_by: dict[str, float] = {}
     energy_by: dict[str, float] = {}
     for label, t, e in zip(labels, dt, de):
-        if t > 0:  # a reboot steps time back: not a duration
-            time_by[label] = time_by.get(label, 0.0) + float(t)
+        time_by[label] = time_by.get(label, 0.0) + float(t)
         if math.isfinite(e):
             energy_by[label] = energy_by.get(label, 0.0) + float(e)
     starts = Counter(label for label, c in zip(labels, tr.changed) if c)
@@ -100,7 +102,7 @@ def summarise(dive: Dive, *, nominal: Mapping[int, Polyline] | None = None, nomi
     deviation, note = _deviation(tr, nominal or {}, nominal_note)
     return DiveSummary(
         log=str(dive.log.path), where_it_ends=dive.log.where_it_ends(),
-        vehicle_s=float(tr.time_s[-1] - tr.time_s[0]) if n else 0.0,
+        vehicle_s=float(latest[-1] - tr.time_s[0]) if n else 0.0,
         wall_s=float(tr.wall_s[-1] - tr.wall_s[0]) if n else 0.0,
         distance_m=tr.distance_m(), decisions=n, action_starts=dict(starts),
         decisions_by_action=dict(Counter(labels)), time_by_action_s=time_by, energy_by_action_wh=energy_by,
