@@ -96,7 +96,9 @@ class Dive:
     policy: tuple[dict[str, Any], ...]  # /executive/policy records: loaded, received, swapped, refused
     events: tuple[Event, ...]
     states: int  # /vehicle/state records read
-    unix_offset_s: float | None  # UTC (Unix s) = vehicle time + this, from the autopilot's SYSTEM_TIME
+    # UTC (Unix s) = vehicle time + this, from the autopilot's first SYSTEM_TIME with UTC; after an
+    # autopilot reboot (vehicle time restarts) later times are off by the uptime before it.
+    unix_offset_s: float | None
 
     def utc_s(self, time_s: float | NDArray[np.float64]) -> float | NDArray[np.float64] | None:
         """Unix time of vehicle time ``time_s``, or None when the autopilot never sent UTC."""
@@ -130,9 +132,9 @@ def load_dive(log: DiveLog) -> Dive:
             rows["wall_s"].append(m.publish_time_s)
             for key in ("lat_deg", "lon_deg", "depth_m", "heading_deg"):
                 rows[key].append(_num(p.get(key)))
-            rows["situation"].append(str(p.get("situation")))
+            rows["situation"].append(str(p.get("situation") or "unknown"))
             rows["action"].append(p.get("action"))
-            rows["mode"].append(str(p.get("mode")))
+            rows["mode"].append(str(p.get("mode") or "unknown"))
             cell = p.get("cell")
             rows["cell"].append(cell if isinstance(cell, list) and len(cell) == 4 else [-1, -1, -1, -1])
             rows["energy"].append(energy)
