@@ -1,0 +1,186 @@
+"""The post-dive report (``planner.report``) on a real closed-loop log, and its track segmentation by hand.
+
+The log comes from the executive (in this process) flying ``lrauv sim`` (a child
+process) over UDP on 127.0.0.1 at high speed-up, from two cells west of the
+demo goal: a few seconds of wall time, usually to the goal.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+import struct
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from executive.audit import logged_tables
+from executive.dive import Track, load_dive
+from executive.divelog import open_dive
+from executive.helm import HelmConfig
+from executive.loop import ExecConfig, Executive
+from planner.report import ActionRun, action_runs, track_segments, write_report
+
+from tests.helpers import start_west_of_goal
+from tests.test_closed_loop import Sim
+
+SPEEDUP = "2000"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+SUMMARY = "goal       reached <after> 0.4 h & 1.2 Wh\n\"quoted\" 'text'"
+
+
+@pytest.fixture(scope="module")
+def dive_log(demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
+    """A short real log: the demo table flown from 2 cells west of the goal at 2000 times real time."""
+    log = tmp_path_factory.mktemp("report-log") / "short.mcap"
+    lon, lat = start_west_of_goal(demo_plan.table, cells=2)
+    sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--speedup", SPEEDUP)
+    stop = threading.Event()
+    try:
+        config = ExecConfig(link=f"udpout:127.0.0.1:{sim.port}", log_path=log, exit_on_arrival=True, linger_s=5.0,
+                            max_wall_s=20.0, helm=HelmConfig())
+        Executive(config, demo_plan.table).run(stop)
+    finally:
+        stop.set()
+        sim.stop()
+    return log
+
+
+@pytest.fixture(scope="module")
+def dive(dive_log):  # type: ignore[no-untyped-def]
+    return load_dive(open_dive(dive_log))
+
+
+def _png_size(path: Path) -> tuple[int, int]:
+    """(width, height) from the IHDR chunk, after checking the signature."""
+    data = path.read_bytes()
+    assert data[:8] == PNG_SIGNATURE, f"{path.name} is not a PNG"
+    assert data[12:16] == b"IHDR"
+    width, height = struct.unpack(">II", data[16:24])
+    return width, height
+
+
+def _check_pictures(index: Path, expected: set[str]) -> str:
+    page = index.read_text(encoding="utf-8")
+    assert set(re.findall(r'<img src="([^"]+)"', page)) == expected
+    for name in expected:
+        width, height = _png_size(index.parent / name)
+        assert 600 <= width <= 3000 and 400 <= height <= 3000, (name, width, height)
+        image = pytest.importorskip("matplotlib.image").imread(index.parent / name)
+        assert image.shape[:2] == (height, width)
+        assert float(np.ptp(image[..., :3])) > 0.5  # not a blank picture
+    assert not list(index.parent.glob(".*.tmp"))  # atomic writes left no temporary file
+    return page
+
+
+def test_report_with_the_plan(dive, demo_plan, tmp_path):
+    assert len(dive.track) > 50 and any(a == "FORWARD" for a in dive.track.action)
+    index = write_report(dive, tmp_path / "report", tables=logged_tables(dive.log), plan=demo_plan,
+                         summary_text=SUMMARY)
+    assert index == tmp_path / "report" / "index.html"
+    page = _check_pictures(index, {"track.png", "timeseries.png", "cost.png"})
+    assert f"<pre>{html.escape(SUMMARY)}</pre>" in page
+    assert "<after>" not in page
+    assert dive.log.path.name in page
+    assert "not drawn" not in page and "pass --forecast" not in page
+
+
+def test_report_without_the_plan_notes_what_is_missing(dive, tmp_path):
+    index = write_report(dive, tmp_path, tables=logged_tables(dive.log), plan=None, summary_text=SUMMARY)
+    page = _check_pictures(index, {"track.png", "timeseries.png"})
+    assert not (tmp_path / "cost.png").exists()
+    notes = page[page.index("<h2>Notes</h2>"):page.index("<h2>Pictures</h2>")]
+    assert "cost.png</code>: not drawn: the predicted cost-to-go needs the planning forecast" in notes
+    assert "track.png</code>: drawn without currents and the nominal path" in notes
+    assert notes.count("pass --forecast") == 2
+    assert f"<pre>{html.escape(SUMMARY)}</pre>" in page
+
+
+def test_report_replaces_an_earlier_one(dive, demo_plan, tmp_path):
+    tables = logged_tables(dive.log)
+    write_report(dive, tmp_path, tables=tables, plan=None, summary_text="report one")
+    index = write_report(dive, tmp_path, tables=tables, plan=demo_plan, summary_text="report two")
+    page = _check_pictures(index, {"track.png", "timeseries.png", "cost.png"})
+    assert "<pre>report two</pre>" in page and "report one" not in page
+
+
+def test_report_with_a_plan_of_a_table_the_dive_never_used(dive, demo_plan, tmp_path):
+    """No logged table has the plan's actions (none is given): no prediction; the map comes from the plan's table."""
+    assert set(dive.track.table_crc32) == {f"{demo_plan.table.crc32:08x}"}
+    index = write_report(dive, tmp_path, tables={}, plan=demo_plan, summary_text="")
+    page = _check_pictures(index, {"track.png", "timeseries.png"})
+    assert f"cost.png</code>: not drawn: no decision under the planned table ({demo_plan.table.crc32:08x})" in page
+    assert "track.png</code>: drawn without the nominal path" in page
+
+
+# --------------------------------------------------------------------------- segmentation by hand
+
+
+def _track(actions: list[str | None], lat: list[float]) -> Track:
+    n = len(actions)
+    f = np.arange(n, dtype=np.float64)
+    return Track(time_s=f, wall_s=f, lat_deg=np.asarray(lat, dtype=np.float64), lon_deg=-118.0 + 0.01 * f,
+                 depth_m=np.zeros(n), heading_deg=np.full(n, 90.0), situation=("following",) * n,
+                 action=tuple(actions), mode=("GUIDED",) * n, cell=np.full((n, 4), -1, dtype=np.int64),
+                 energy_used_wh=f, battery_pct=np.full(n, 100.0), goal_index=np.zeros(n, dtype=np.int64),
+                 changed=np.ones(n, dtype=bool), table_crc32=("0badc0de",) * n)
+
+
+def test_action_runs_merge_equal_neighbours():
+    assert action_runs([]) == []
+    assert action_runs(["FORWARD", "FORWARD", "DRIFT", None, None, "FORWARD"]) == [
+        ActionRun(0, 2, "FORWARD"), ActionRun(2, 3, "DRIFT"), ActionRun(3, 5, None), ActionRun(5, 6, "FORWARD")]
+
+
+def test_track_segments_by_action_join_the_next_run_and_skip_rows_without_position():
+    """Rows 0..7: F F F D D - - F with no position at row 1 (not following = None).
+
+    Each polyline runs from its run's first row to the next run's first row, so
+    F covers 0, 2, 3 (row 1 has no position), D 3..5, None 5..7, and the last F
+    is the single row 7.
+    """
+    nan = float("nan")
+    track = _track(["FORWARD", "FORWARD", "FORWARD", "DRIFT", "DRIFT", None, None, "FORWARD"],
+                   [33.0, nan, 33.0, 33.0, 33.0, 33.0, 33.0, 33.0])
+    segments = track_segments(track)
+    assert [s.action for s in segments] == ["FORWARD", "DRIFT", None, "FORWARD"]
+    assert [s.rows.tolist() for s in segments] == [[0, 2, 3], [3, 4, 5], [5, 6, 7], [7]]
+
+
+def test_track_segments_merge_across_a_row_without_position():
+    nan = float("nan")
+    track = _track(["DRIFT", "FORWARD", "DRIFT", "DRIFT"], [33.0, nan, 33.0, 33.0])
+    segments = track_segments(track)
+    assert [(s.action, s.rows.tolist()) for s in segments] == [("DRIFT", [0, 2, 3])]
+
+
+def test_track_segments_thin_long_runs_but_keep_every_boundary():
+    actions = ["DRIFT"] * 5000 + ["ROTATE_LEFT"] * 3 + ["FORWARD"] * 5000
+    track = _track(actions, [33.0] * len(actions))
+    segments = track_segments(track, max_points=200)
+    assert [s.action for s in segments] == ["DRIFT", "ROTATE_LEFT", "FORWARD"]
+    drift, rotate, forward = (s.rows.tolist() for s in segments)
+    assert drift[0] == 0 and drift[-2:] == [4999, 5000] and len(drift) <= 110
+    assert rotate == [5000, 5002, 5003]  # first and last of the run (5001 thinned out), then the next run
+    assert forward[0] == 5003 and forward[-1] == 10002 and len(forward) <= 110
+    for s in segments:
+        assert np.all(np.diff(s.rows) > 0)
+
+
+def test_track_segments_stay_bounded_when_the_action_changes_every_row():
+    actions = ["FORWARD", "DRIFT"] * 5000
+    track = _track(actions, [33.0] * len(actions))
+    segments = track_segments(track, max_points=300)
+    points = sum(s.rows.size for s in segments)
+    assert points <= 2 * 300 + 2
+    assert segments[0].rows[0] == 0 and segments[-1].rows[-1] == len(actions) - 1
+    # Consecutive polylines join: each starts where the previous one ended.
+    for a, b in zip(segments[:-1], segments[1:]):
+        assert a.rows[-1] == b.rows[0]
+
+
+def test_track_segments_of_a_track_without_positions_is_empty():
+    nan = float("nan")
+    assert track_segments(_track(["DRIFT", None], [nan, nan])) == []
