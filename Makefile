@@ -38,6 +38,8 @@ demo: $(STAMP)
 	  --export-values $(OUT)/values.npz --plot $(OUT)/pictures
 	$(LRAUV) demo --mission missions/demo.yaml --table $(OUT)/demo.lrpt --truth $(OUT)/truth.nc \
 	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --out $(OUT)
+	$(LRAUV) replay $(OUT)/demo.mcap --report $(OUT)/report \
+	  --csv $(OUT)/dive.csv --geojson $(OUT)/dive.geojson --gpx $(OUT)/dive.gpx
 
 # The stamp lives in node_modules: deleting node_modules, or a newer package.json or lock, reinstalls.
 # An install that fails (no registry) removes what it left, warns, and the Node tests skip.
