@@ -21,11 +21,13 @@ Supported layouts:
 from __future__ import annotations
 
 import hashlib
+import inspect
 import os
 import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -103,6 +105,18 @@ class Forecast:
                 )
         else:
             raise ForecastError(f"{src}: lon/lat: expected both 1-D or both 2-D; got {lon.ndim}-D and {lat.ndim}-D")
+        for name, axis, bound in (("lon_deg", lon, _MAX_ABS_LON_DEG), ("lat_deg", lat, 90.0)):
+            finite = axis[np.isfinite(axis)]
+            if finite.size and (finite.min() < -bound or finite.max() > bound):
+                raise ForecastError(
+                    f"{src}: {name}: values {finite.min():g}..{finite.max():g} lie outside [-{bound:g}, {bound:g}] "
+                    "degrees; expected longitudes and latitudes in degrees (check the coordinate variables and their units)"
+                )
+        if np.max(np.abs(time_s)) > _MAX_ABS_TIME_S:
+            raise ForecastError(
+                f"{src}: time_s: {np.max(np.abs(time_s)):g} s from the time origin; expected times within "
+                f"{_MAX_ABS_TIME_S:g} s (about 300,000 years) of it (check the time units)"
+            )
         if depth is None:
             if n_z != 1:
                 raise ForecastError(f"{src}: depth_m is None (no depth axis) but u/v have {n_z} levels; expected 1")
@@ -225,10 +239,22 @@ _STANDARD_CALENDARS = {"", "standard", "gregorian", "proleptic_gregorian"}
 
 # Finite values beyond this are undeclared fill (no ocean current is 1 km/s).
 _MAX_PLAUSIBLE_SPEED_M_S = 1000.0
+# Longitudes run -180..180 or 0..360 (a few products go further west); beyond this a file's
+# "degrees" are something else.
+_MAX_ABS_LON_DEG = 360.0
+# Times this far from their origin overflow datetime64[ms] arithmetic (about 292,000 years).
+_MAX_ABS_TIME_S = 1e13
+
+# The loader reads whole velocity variables and works on float64 copies of them (about ten
+# arrays of this size at the peak): a larger file must be subset before planning. Checked
+# before anything is read, so a damaged header that claims a huge dimension costs nothing.
+MAX_VALUES_PER_VARIABLE = 100_000_000
 
 
 # What netCDF4/xarray/pyproj raise on damaged or unexpected files; wrapped into ForecastError.
-_LIBRARY_ERRORS = (OSError, ValueError, KeyError, TypeError, RuntimeError, IndexError, AttributeError, ArithmeticError)
+_LIBRARY_ERRORS = (
+    OSError, ValueError, KeyError, TypeError, RuntimeError, IndexError, AttributeError, ArithmeticError, MemoryError,
+)
 
 
 def _attr(var: xr.DataArray | xr.Variable, key: str) -> str:
@@ -316,6 +342,15 @@ def file_identity(path: Path, label: str | None = None) -> str:
     return "sha256:" + digest.hexdigest()[:16]
 
 
+# Lazily opened: no index is built from a coordinate at open time, so a damaged header that
+# claims a huge dimension is refused (MAX_VALUES_PER_VARIABLE) before anything is read.
+_LAZY_OPEN = (
+    {"create_default_indexes": False}
+    if "create_default_indexes" in inspect.signature(xr.open_dataset).parameters
+    else {}
+)
+
+
 def _open_dataset(path: str | os.PathLike[str], what: str) -> tuple[xr.Dataset, str, Path]:
     label = os.fspath(path)
     p = Path(label)
@@ -323,6 +358,7 @@ def _open_dataset(path: str | os.PathLike[str], what: str) -> tuple[xr.Dataset, 
         raise ForecastError(f"{label}: {what} not found; check the path")
     if not p.is_file():
         raise ForecastError(f"{label}: {what} is not a regular file; expected a netCDF file")
+    _check_complete(p, label, what)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # xarray's SerializationWarnings about odd encodings
@@ -333,13 +369,153 @@ def _open_dataset(path: str | os.PathLike[str], what: str) -> tuple[xr.Dataset, 
                 decode_timedelta=False,
                 decode_coords=False,
                 mask_and_scale=True,  # CF fill -> NaN (land, spec section 1); never fillna(0)
+                **_LAZY_OPEN,
             )
-    except (OSError, ValueError, KeyError, TypeError, RuntimeError, IndexError) as exc:
+    except _LIBRARY_ERRORS as exc:
         raise ForecastError(
             f"{label}: cannot open {what} as netCDF ({type(exc).__name__}: {exc}); expected a netCDF-3 or "
             "netCDF-4 file of ocean currents"
         ) from exc
     return ds, label, p
+
+
+class _CutHeader(Exception):
+    """The file ends inside its own header."""
+
+
+# netCDF-3 external types (NC_BYTE .. NC_UINT64) and their sizes in bytes.
+_CDF_TYPE_BYTES = {1: 1, 2: 1, 3: 2, 4: 4, 5: 4, 6: 8, 7: 1, 8: 2, 9: 4, 10: 8, 11: 8}
+
+
+def _check_complete(p: Path, label: str, what: str) -> None:
+    """Refuse an empty or truncated file from its own header, before the netCDF library reads it.
+
+    A cut netCDF-4 (HDF5) file fails to open with a bare "HDF error"; a cut netCDF-3 file opens and
+    reads zeros where its data is missing. Both headers say how long the file must be: HDF5's
+    superblock stores the end-of-file address, a netCDF-3 header every variable's offset and shape.
+    """
+    try:
+        size = p.stat().st_size
+        if size == 0:
+            raise ForecastError(f"{label}: {what} is empty (0 bytes); expected a netCDF file")
+        with p.open("rb") as fh:
+            head = fh.read(8)
+            fh.seek(0)
+            if head[:3] == b"CDF" and len(head) >= 4 and head[3] in (1, 2, 5):
+                kind, need = "netCDF-3", _netcdf3_min_size(fh, head[3], size)
+            elif head == b"\x89HDF\r\n\x1a\n":
+                kind, need = "netCDF-4/HDF5", _hdf5_min_size(fh.read(96))
+            else:
+                return
+    except _CutHeader:
+        raise ForecastError(
+            f"{label}: truncated or damaged {what}: its header runs past the end of the file ({size:,} bytes); "
+            "copy or download it again"
+        ) from None
+    except OSError as exc:
+        raise ForecastError(f"{label}: cannot read the {what} ({exc.strerror or exc})") from None
+    if need is not None and size < need:
+        raise ForecastError(
+            f"{label}: truncated {what}: its {kind} header says the file holds at least {need:,} bytes, the file has "
+            f"{size:,} ({100.0 * size / need:.3g} %); copy or download it again"
+        )
+
+
+def _hdf5_min_size(sb: bytes) -> int | None:
+    """End-of-file address from an HDF5 superblock at offset 0 (versions 0 to 3), or None when not stated."""
+    if len(sb) < 16:
+        raise _CutHeader
+    version = sb[8]
+    if version in (0, 1):
+        n_off = sb[13]
+        at = 24 + (4 if version == 1 else 0)
+        fields = (at, at + 2 * n_off)  # base address, end-of-file address
+    elif version in (2, 3):
+        n_off = sb[9]
+        fields = (12, 12 + 2 * n_off)
+    else:
+        return None
+    if n_off not in (2, 4, 8):
+        return None
+    if len(sb) < fields[1] + n_off:
+        raise _CutHeader
+    base, eof = (int.from_bytes(sb[f : f + n_off], "little") for f in fields)
+    undefined = (1 << (8 * n_off)) - 1
+    if eof == undefined:
+        return None
+    return (0 if base == undefined else base) + eof
+
+
+def _netcdf3_min_size(fh: Any, version: int, size: int) -> int | None:
+    """Bytes a classic (1), 64-bit offset (2) or CDF-5 (5) netCDF file needs, from its header.
+
+    Layout: the NetCDF Classic and 64-bit Offset Format specification (Unidata, NetCDF User's Guide,
+    "File Format Specifications"), and CDF-5 for 8-byte counts.
+    """
+    count_bytes = 8 if version == 5 else 4
+    offset_bytes = 4 if version == 1 else 8
+
+    def take(n: int) -> bytes:
+        if n > size - fh.tell():  # also keeps a garbage length from allocating gigabytes
+            raise _CutHeader
+        return fh.read(n)
+
+    def number(n: int) -> int:
+        return int.from_bytes(take(n), "big")
+
+    def items(min_bytes: int) -> int:
+        tag, n = number(4), number(count_bytes)
+        if tag == 0 and n == 0:  # ABSENT
+            return 0
+        if n * min_bytes > size - fh.tell():
+            raise _CutHeader
+        return n
+
+    def name() -> None:
+        take((number(count_bytes) + 3) // 4 * 4)
+
+    def attributes() -> None:
+        for _ in range(items(12)):
+            name()
+            nc_type, n = number(4), number(count_bytes)
+            take((n * _CDF_TYPE_BYTES.get(nc_type, 1) + 3) // 4 * 4)
+
+    take(4)  # magic
+    numrecs = number(count_bytes)
+    dims = []
+    for _ in range(items(8)):
+        name()
+        dims.append(number(count_bytes))
+    attributes()
+    need = fh.tell()
+    records: list[tuple[int, int]] = []  # (begin, bytes per record) of record variables
+    for _ in range(items(16)):
+        name()
+        n_dims = number(count_bytes)
+        if n_dims * count_bytes > size - fh.tell():
+            raise _CutHeader
+        dim_ids = [number(count_bytes) for _ in range(n_dims)]
+        attributes()
+        nc_type = number(4)
+        number(count_bytes)  # vsize: clipped for large variables; recomputed from the shape
+        begin = number(offset_bytes)
+        shape = [dims[d] if 0 <= d < len(dims) else 0 for d in dim_ids]
+        per_value = _CDF_TYPE_BYTES.get(nc_type, 1)
+        if shape and dim_ids[0] < len(dims) and dims[dim_ids[0]] == 0:
+            n = per_value
+            for length in shape[1:]:
+                n *= length
+            records.append((begin, n))
+        else:
+            n = per_value
+            for length in shape:
+                n *= length
+            need = max(need, begin + n)
+    if records and numrecs not in (0, (1 << (8 * count_bytes)) - 1):
+        # One record holds every record variable, each padded to 4 bytes unless it is the only one.
+        record_size = records[0][1] if len(records) == 1 else sum((n + 3) // 4 * 4 for _, n in records)
+        need = max(need, *(begin + (numrecs - 1) * record_size + n for begin, n in records))
+    return need
 
 
 def open_forecast(
@@ -366,11 +542,16 @@ def open_forecast(
     grid_ds: xr.Dataset | None = None
     grid_label: str | None = None
     try:
-        identity = file_identity(p, label)
         if grid_file is not None:
             grid_ds, grid_label, _ = _open_dataset(grid_file, "grid file")
         ctx = _Context(ds=ds, label=label, grid_ds=grid_ds, grid_label=grid_label)
-        return _load(ctx, identity, variables)
+        with warnings.catch_warnings(), np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            # Damaged values (a fill value that does not fit its type, NaN cast to an integer) must
+            # not print numpy warnings beside the CLI's one error line; the notes say what matters.
+            warnings.simplefilter("ignore", RuntimeWarning)
+            # The file's hash is taken once its header has been checked: a damaged header that
+            # claims gigabytes is refused before its bytes are read.
+            return _load(ctx, lambda: file_identity(p, label), variables)
     except ForecastError:
         raise
     except GridError as exc:
@@ -413,10 +594,14 @@ class _Context:
         return "" if self.grid_ds is not None else "; pass --grid-file GRID.nc (grid_file=) with the model grid"
 
 
-def _load(ctx: _Context, identity: str, variables: tuple[str, str] | None) -> Forecast:
+def _load(ctx: _Context, identity: Callable[[], str], variables: tuple[str, str] | None) -> Forecast:
     ds, label = ctx.ds, ctx.label
     u_name, v_name, kind = _find_velocity_variables(ds, label, variables)
     u_var, v_var = ds[u_name], ds[v_name]
+    for name, var in ((u_name, u_var), (v_name, v_var)):
+        _check_packing(var, name, label)
+        _check_numeric(var, f"variable {name}", label)
+        _check_size(var, name, label)
     notes: list[str] = [f"variables: {u_name}, {v_name}" + _describe_std_names(u_var, v_var)]
     if _is_c_grid(ds, u_var, v_var):
         parts = _load_c_grid(ctx, u_name, v_name, kind, notes)
@@ -432,7 +617,7 @@ def _load(ctx: _Context, identity: str, variables: tuple[str, str] | None) -> Fo
     notes.append(f"land (NaN in u or v): {100.0 * (1.0 - finite.mean()):.1f} % of values")
     return Forecast(
         source=label,
-        identity=identity,
+        identity=identity(),
         time_s=parts["time_s"],
         time_origin=parts["time_origin"],
         lon_deg=parts["lon"],
@@ -444,6 +629,55 @@ def _load(ctx: _Context, identity: str, variables: tuple[str, str] | None) -> Fo
         variables=(u_name, v_name),
         covers_surface=parts.get("covers_surface", True),
     )
+
+
+def _check_numeric(var: xr.DataArray | xr.Variable, what: str, label: str) -> None:
+    """Refuse text, character, boolean or compound variables before their values are read."""
+    kind = np.dtype(var.dtype).kind
+    if kind not in "fiu":
+        shown = "text" if kind in "SUO" else str(var.dtype)
+        raise ForecastError(
+            f"{label}: {what} holds {shown} values (dtype {var.dtype}, dimensions {tuple(str(d) for d in var.dims)}); "
+            "expected numbers (floating point, or integers packed with scale_factor/add_offset)"
+        )
+
+
+def _numbers(var: xr.DataArray | xr.Variable, what: str, label: str) -> NDArray[np.float64]:
+    """A coordinate or grid variable's values as float64, after checking that they are numbers."""
+    _check_numeric(var, what, label)
+    return np.asarray(var.values, dtype=np.float64)
+
+
+def _check_size(var: xr.DataArray, name: str, label: str) -> None:
+    """Refuse a velocity variable too large to load, from its declared shape alone."""
+    n = 1
+    for size in var.shape:
+        n *= int(size)
+    if n > MAX_VALUES_PER_VARIABLE:
+        dims = " x ".join(f"{d} {int(s):,}" for d, s in zip(var.dims, var.shape))
+        raise ForecastError(
+            f"{label}: variable {name} declares {n:,} values ({dims}); expected at most "
+            f"{MAX_VALUES_PER_VARIABLE:,} per velocity variable: subset the file to the region, depths and times "
+            "to plan on (e.g. ncks -d lon,W,E -d lat,S,N -d time,0,N), or check a damaged dimension"
+        )
+
+
+def _check_packing(var: xr.DataArray, name: str, label: str) -> None:
+    """scale_factor and add_offset (moved to ``encoding`` by xarray) must be finite numbers, scale_factor non-zero."""
+    for key in ("scale_factor", "add_offset"):
+        value = var.encoding.get(key, var.attrs.get(key))
+        if value is None:
+            continue
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "fiu" or arr.size != 1 or not np.isfinite(arr.astype(np.float64)).all():
+            raise ForecastError(
+                f"{label}: variable {name}: {key} {value!r} is not a finite number; expected one number (CF packing)"
+            )
+        if key == "scale_factor" and float(arr.ravel()[0]) == 0.0:
+            raise ForecastError(
+                f"{label}: variable {name}: scale_factor is 0, which would make every current 0 m/s; expected a "
+                "non-zero number (CF packing)"
+            )
 
 
 def _describe_std_names(u_var: xr.DataArray, v_var: xr.DataArray) -> str:
@@ -642,7 +876,7 @@ def _read_time(
         notes.append(f"time dimension {time_dim!r} has no coordinate variable: steps numbered 0..{n - 1} s")
         return np.arange(n, dtype=np.float64), None
     tvar = ds.variables[tvar_name]
-    values = np.asarray(tvar.values, dtype=np.float64)
+    values = _numbers(tvar, f"time variable {tvar_name}", label)
     if not np.all(np.isfinite(values)):
         raise ForecastError(f"{label}: time variable {tvar_name} has missing values; expected {n} finite times")
     units = _attr(tvar, "units")
@@ -746,8 +980,8 @@ def _load_structured(ctx: _Context, u_name: str, v_name: str, kind: str, notes: 
     grid_mapping = _grid_mapping_var(ds, u_var)
     if xcoord is not None and ycoord is not None and _is_lon_like(xdim, xcoord) and _is_lat_like(ydim, ycoord):
         # Regular lon/lat grid (spec section 1: separable interpolation).
-        lon = np.asarray(xcoord.values, dtype=np.float64)
-        lat = np.asarray(ycoord.values, dtype=np.float64)
+        lon = _numbers(xcoord, f"coordinate {xdim}", label)
+        lat = _numbers(ycoord, f"coordinate {ydim}", label)
         lon, lat, u, v = _orient_regular(lon, lat, u, v, label, xdim, ydim, notes)
         if kind == "grid_xy":
             notes.append("x/y components on a regular lon/lat grid: x is east and y is north, no rotation")
@@ -761,7 +995,7 @@ def _load_structured(ctx: _Context, u_name: str, v_name: str, kind: str, notes: 
     xy: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
     if grid_mapping is not None and xcoord is not None and ycoord is not None:
         crs = _crs_from_grid_mapping(grid_mapping, label)
-        xy = (np.asarray(xcoord.values, dtype=np.float64), np.asarray(ycoord.values, dtype=np.float64))
+        xy = (_numbers(xcoord, f"coordinate {xdim}", label), _numbers(ycoord, f"coordinate {ydim}", label))
     if lonlat is not None:
         lon, lat, where = lonlat
         notes.append(f"2-D lon/lat from {where}")
@@ -833,7 +1067,7 @@ def _read_depth_axis(
         if zvar is None:
             notes.append("no depth axis: the field applies to every layer (spec section 1)")
             return None
-    values = np.atleast_1d(np.asarray(zvar.values, dtype=np.float64))
+    values = np.atleast_1d(_numbers(zvar, f"depth variable {zdim}", label))
     if not np.all(np.isfinite(values)):
         raise ForecastError(f"{label}: depth variable {zdim} has missing values; expected finite depths in metres")
     units = _attr(zvar, "units").lower()
@@ -847,6 +1081,13 @@ def _read_depth_axis(
     if positive == "up" or std in {"height", "altitude"} or elevation:
         values = -values
         notes.append(f"depth variable {zdim} is elevation (positive up): negated to depth positive down")
+    if np.any(values < 0):
+        sense = f"positive = {positive!r}" if positive else "no 'positive' attribute, values of both signs"
+        above = ", ".join(f"{d:g}" for d in values[values < 0][:6])
+        raise ForecastError(
+            f"{label}: depth variable {zdim}: levels above the sea surface ({above} m as depth, {sense}); expected "
+            "depths >= 0 m positive down, or heights <= 0 with positive = 'up'"
+        )
     if values.size == 1:
         notes.append(
             f"one depth level at {values[0]:g} m ({zdim}): layers shallower take it, deeper layers are land "
@@ -868,9 +1109,14 @@ def _orient_regular(
     notes: list[str],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Flip descending axes to ascending and drop a duplicated wrap-around column (spec section 1 grids)."""
-    for name, axis in ((xdim, lon), (ydim, lat)):
+    for name, axis, bound in ((xdim, lon, _MAX_ABS_LON_DEG), (ydim, lat, 90.0)):
         if not np.all(np.isfinite(axis)):
             raise ForecastError(f"{label}: coordinate {name} has missing values; expected finite degrees")
+        if axis.min() < -bound or axis.max() > bound:
+            raise ForecastError(
+                f"{label}: coordinate {name}: values {axis.min():g}..{axis.max():g} lie outside [-{bound:g}, {bound:g}]; "
+                "expected degrees (check the variable and its units)"
+            )
     if lat.size > 1 and lat[0] > lat[-1]:
         lat, u, v = lat[::-1], u[:, :, ::-1, :], v[:, :, ::-1, :]
         notes.append(f"latitude {ydim} was descending: flipped to ascending")
@@ -910,8 +1156,8 @@ def _find_2d_lonlat(
             elif lat_name is None and _is_lat_like(name, cand):
                 lat_name = name
         if lon_name and lat_name:
-            lon = np.asarray(dset.variables[lon_name].values, dtype=np.float64)
-            lat = np.asarray(dset.variables[lat_name].values, dtype=np.float64)
+            lon = _numbers(dset.variables[lon_name], f"longitude {lon_name}", str(where))
+            lat = _numbers(dset.variables[lat_name], f"latitude {lat_name}", str(where))
             if dset.variables[lon_name].dims == (xdim, ydim) and ydim != xdim:
                 lon, lat = lon.T, lat.T
             return lon, lat, f"{lon_name}/{lat_name} in {where}"
@@ -1025,8 +1271,8 @@ def _load_c_grid(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list
             f"{label}: ROMS/CROCO C-grid variables {u_name}/{v_name} but no lon_rho/lat_rho (rho-point longitude/"
             f"latitude) in {where}{hint}"
         )
-    lon = np.asarray(lon_found[1].values, dtype=np.float64)
-    lat = np.asarray(lat_found[1].values, dtype=np.float64)
+    lon = _numbers(lon_found[1], "lon_rho", lon_found[2])
+    lat = _numbers(lat_found[1], "lat_rho", lat_found[2])
     if lon.ndim != 2 or lon.shape != lat.shape:
         raise ForecastError(
             f"{label}: lon_rho/lat_rho: expected two 2-D arrays of equal shape; got {lon.shape}, {lat.shape}"

@@ -294,72 +294,50 @@ class PolicyTable:
             header = json.loads(data[_PREAMBLE.size : pos].decode("utf-8"))
         except (UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise TableError(f"{name}: header is not valid JSON: {exc}") from None
-        stored = data[pos + _PAYLOAD.size : end]
+        except RecursionError:
+            raise TableError(f"{name}: header is not valid JSON: nested too deeply") from None
         try:
-            raw = zlib.decompress(stored) if flags & FLAG_ZLIB else stored
-        except zlib.error as exc:
-            raise TableError(f"{name}: compressed payload is corrupt: {exc}") from None
-        table = cls._from_parts(header, raw, raw_len, name)
+            fields = _header_fields(header)
+        except TableError as exc:
+            raise TableError(f"{name}: header {exc}") from None
+        shape = (len(fields["depth_m"]), fields["ny"], fields["nx"])
+        expected = _payload_len(shape[0] * shape[1] * shape[2])
+        if raw_len != expected:
+            raise TableError(
+                f"{name}: payload declared as {raw_len:,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
+                f"{N_HEADINGS} needs {expected:,}"
+            )
+        stored = data[pos + _PAYLOAD.size : end]
+        if flags & FLAG_ZLIB:
+            # At most the bytes the grid needs are inflated: a corrupt or hostile stream cannot
+            # make the reader allocate more than the table it claims to be.
+            inflate = zlib.decompressobj()
+            try:
+                raw = inflate.decompress(stored, expected + 1)
+            except zlib.error as exc:
+                raise TableError(f"{name}: compressed payload is corrupt: {exc}") from None
+            if len(raw) > expected or inflate.unconsumed_tail:
+                raise TableError(f"{name}: compressed payload inflates to more than the {expected:,} bytes the grid needs")
+            if not inflate.eof:
+                raise TableError(f"{name}: compressed payload is corrupt: the zlib stream ends early ({len(raw):,} of {expected:,} bytes)")
+        else:
+            raw = stored
+        if len(raw) != expected:
+            raise TableError(
+                f"{name}: payload is {len(raw):,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
+                f"{N_HEADINGS} needs {expected:,}"
+            )
+        water, actions = _unpack_payload(raw, shape)
+        if np.any(actions > Action.UNREACHABLE):
+            raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} in the payload")
+        if np.any(actions[~water] != Action.UNREACHABLE):
+            raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
+        table = cls(actions=actions, water=water, **fields)
         if flags & FLAG_ZLIB:
             # A compressed file is the serialisation ``crc32`` names: keep its checked CRC rather
             # than compress the whole table again (12 ms at 320,000 states, on the executive's loop).
             table.__dict__["crc32"] = crc
         return table
-
-    @classmethod
-    def _from_parts(cls, header: dict[str, Any], raw: bytes, raw_len: int, name: str) -> PolicyTable:
-        try:
-            g = header["grid"]
-            nx, ny = _int(g["nx"], "grid.nx"), _int(g["ny"], "grid.ny")
-            depths = tuple(_float(d, "grid.depth_m") for d in g["depth_m"])
-            if header["headings"]["count"] != N_HEADINGS:
-                raise TableError(f"headings.count: expected {N_HEADINGS}; got {header['headings']['count']!r}")
-            goal = header["goal"]
-            forecast = header["forecast"]
-            kwargs = dict(
-                lon0_deg=_float(g["lon0_deg"], "grid.lon0_deg"),
-                lat0_deg=_float(g["lat0_deg"], "grid.lat0_deg"),
-                dlon_deg=_float(g["dlon_deg"], "grid.dlon_deg"),
-                dlat_deg=_float(g["dlat_deg"], "grid.dlat_deg"),
-                nx=nx,
-                ny=ny,
-                depth_m=depths,
-                goal_lon_deg=_float(goal["lon_deg"], "goal.lon_deg"),
-                goal_lat_deg=_float(goal["lat_deg"], "goal.lat_deg"),
-                goal_depth_m=_float(goal["depth_m"], "goal.depth_m"),
-                goal_radius_cells=_int(goal["radius_cells"], "goal.radius_cells"),
-                criterion=str(header["criterion"]),
-                uncertainty=str(header["uncertainty"]),
-                model=str(header["model"]),
-                costs={str(k): _int(v, f"costs.{k}") for k, v in header["costs"].items()},
-                forecast_source=str(forecast["source"]),
-                forecast_identity=str(forecast["identity"]),
-                forecast_time=None if forecast["time"] is None else str(forecast["time"]),
-                planner_version=str(header["planner_version"]),
-            )
-        except KeyError as exc:
-            raise TableError(f"{name}: header lacks the key {exc.args[0]!r}") from None
-        except (TypeError, AttributeError) as exc:
-            raise TableError(f"{name}: header has a field of the wrong type: {exc}") from None
-        except TableError as exc:
-            raise TableError(f"{name}: {exc}") from None
-        if not depths or nx < 2 or ny < 2 or kwargs["dlon_deg"] <= 0 or kwargs["dlat_deg"] <= 0:
-            raise TableError(f"{name}: grid: expected nx, ny >= 2, positive spacing and at least one depth")
-        n_cells = len(depths) * ny * nx
-        if n_cells * N_HEADINGS > MAX_STATES:
-            raise TableError(f"{name}: grid of {n_cells * N_HEADINGS} states exceeds the limit of {MAX_STATES}")
-        expected = _payload_len(n_cells)
-        if raw_len != expected or len(raw) != expected:
-            raise TableError(
-                f"{name}: payload is {len(raw)} bytes (declared {raw_len}) but the grid "
-                f"{len(depths)} x {ny} x {nx} x {N_HEADINGS} needs {expected}"
-            )
-        water, actions = _unpack_payload(raw, (len(depths), ny, nx))
-        if np.any(actions > Action.UNREACHABLE):
-            raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} in the payload")
-        if np.any(actions[~water] != Action.UNREACHABLE):
-            raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
-        return cls(actions=actions, water=water, **kwargs)
 
     def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> Path:
         """Write atomically: a temporary file in the same folder, then rename."""
@@ -413,6 +391,75 @@ def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int]) -> tuple[NDArr
     actions[0::2] = packed & 0x0F
     actions[1::2] = packed >> 4
     return water, actions[: n_cells * N_HEADINGS].reshape(cell_shape + (N_HEADINGS,))
+
+
+def _header_fields(header: Any) -> dict[str, Any]:
+    """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value."""
+    top = _section(header, "")
+    g = _section(_key(top, "grid", ""), "grid")
+    nx, ny = _int(_key(g, "nx", "grid"), "grid.nx"), _int(_key(g, "ny", "grid"), "grid.ny")
+    for key, n in (("grid.nx", nx), ("grid.ny", ny)):
+        if n < 2:
+            raise TableError(f"{key}: expected at least 2 cells; got {n}")
+    depth_raw = _key(g, "depth_m", "grid")
+    if not isinstance(depth_raw, list) or not depth_raw:
+        raise TableError(f"grid.depth_m: expected a non-empty list of layer depths in metres; got {depth_raw!r}"[:200])
+    depths = tuple(_float(d, f"grid.depth_m[{n}]") for n, d in enumerate(depth_raw))
+    if depths[0] < 0 or any(b <= a for a, b in zip(depths, depths[1:])):
+        raise TableError(f"grid.depth_m: expected depths >= 0, strictly increasing; got {list(depths)[:12]}")
+    n_states = len(depths) * ny * nx * N_HEADINGS
+    if n_states > MAX_STATES:
+        raise TableError(
+            f"grid: {len(depths)} x {ny} x {nx} x {N_HEADINGS} = {n_states:,} states exceeds the limit of {MAX_STATES:,}"
+        )
+    fields: dict[str, Any] = {"nx": nx, "ny": ny, "depth_m": depths}
+    for key in ("lon0_deg", "lat0_deg", "dlon_deg", "dlat_deg"):
+        fields[key] = _float(_key(g, key, "grid"), f"grid.{key}")
+    for key in ("dlon_deg", "dlat_deg"):
+        if fields[key] <= 0:
+            raise TableError(f"grid.{key}: expected a positive spacing in degrees; got {fields[key]!r}")
+    lat_n = fields["lat0_deg"] + (ny - 1) * fields["dlat_deg"]
+    if fields["lat0_deg"] < -90 or lat_n > 90:
+        raise TableError(f"grid: rows span latitudes {fields['lat0_deg']:g}..{lat_n:g}; expected them within [-90, 90]")
+    headings = _section(_key(top, "headings", ""), "headings")
+    if _key(headings, "count", "headings") != N_HEADINGS:
+        raise TableError(f"headings.count: expected {N_HEADINGS}; got {headings['count']!r}")
+    goal = _section(_key(top, "goal", ""), "goal")
+    fields.update(
+        goal_lon_deg=_float(_key(goal, "lon_deg", "goal"), "goal.lon_deg"),
+        goal_lat_deg=_float(_key(goal, "lat_deg", "goal"), "goal.lat_deg"),
+        goal_depth_m=_float(_key(goal, "depth_m", "goal"), "goal.depth_m"),
+        goal_radius_cells=_int(_key(goal, "radius_cells", "goal"), "goal.radius_cells"),
+    )
+    for key in ("criterion", "uncertainty", "model", "planner_version"):
+        fields[key] = _text(_key(top, key, ""), key)
+    costs = _section(_key(top, "costs", ""), "costs")
+    fields["costs"] = {str(k): _int(v, f"costs.{k}") for k, v in costs.items()}
+    forecast = _section(_key(top, "forecast", ""), "forecast")
+    fields["forecast_source"] = _text(_key(forecast, "source", "forecast"), "forecast.source")
+    fields["forecast_identity"] = _text(_key(forecast, "identity", "forecast"), "forecast.identity")
+    when = _key(forecast, "time", "forecast")
+    fields["forecast_time"] = None if when is None else _text(when, "forecast.time")
+    return fields
+
+
+def _section(value: Any, key: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        what = f"{key}: expected a JSON object" if key else "is not a JSON object"
+        raise TableError(f"{what}; got {type(value).__name__} {repr(value)[:60]}")
+    return value
+
+
+def _key(section: dict[str, Any], key: str, parent: str) -> Any:
+    if key not in section:
+        raise TableError(f"lacks the key {f'{parent}.{key}' if parent else key!r}")
+    return section[key]
+
+
+def _text(value: Any, key: str) -> str:
+    if not isinstance(value, str):
+        raise TableError(f"{key}: expected text; got {repr(value)[:60]}")
+    return value
 
 
 def _float(value: Any, key: str) -> float:
