@@ -41,6 +41,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-a
     ex.add_argument("--max-vehicle-h", type=float, help="stop after this much vehicle time")
     ex.add_argument("--telemetry-hz", type=float, default=2.0,
                     help="rate asked for GLOBAL_POSITION_INT and ATTITUDE, in vehicle time (default 2)")
+    ex.add_argument("--signing-key-file", type=Path, metavar="KEY",
+                    help="MAVLink 2 signing key (32 bytes, or 64 hex digits): uploads and commands must be signed with it"
+                         " (default: the mission's signing section; docs/missions.md)")
     ex.add_argument("--quiet", action="store_true")
 
     log = sub.add_parser("log", help="MCAP log tools")
@@ -65,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _exec(args: argparse.Namespace) -> int:
     from executive.loop import ExecConfig, Executive
+    from executive.signing import load_key
 
     from executive import plans
 
@@ -72,11 +76,17 @@ def _exec(args: argparse.Namespace) -> int:
     tables = [PolicyTable.from_bytes(data, name=str(p)) for p, data in zip(args.table, blobs)]
     helm = HelmConfig()
     watch, period_s, replan_on_new = args.watch, None, True
+    key = None
+    if args.signing_key_file is not None:
+        key = load_key(key_file=args.signing_key_file, where="--signing-key-file")
     if args.mission is not None:
         helm, plan, mission = _mission_setup(args.mission, args.table, tables, args.on_arrival)
         if watch is None and mission.forecast.directory is not None:
             watch = mission.forecast.directory
         period_s, replan_on_new = mission.replanning.period_s, mission.replanning.on_new_forecast
+        if key is None and mission.signing is not None:
+            sg = mission.signing
+            key = load_key(key_file=sg.key_file, passphrase_env=sg.passphrase_env, where=sg.where)
     else:
         if len(tables) > 1:
             raise PlannerError("--table: several tables need a --mission to say the order of their goals")
@@ -104,13 +114,14 @@ def _exec(args: argparse.Namespace) -> int:
         link=args.link, log_path=log_path, helm=helm, exit_on_arrival=args.exit_on_arrival, linger_s=args.linger_s,
         max_wall_s=args.max_wall_s, max_vehicle_s=None if args.max_vehicle_h is None else args.max_vehicle_h * 3600.0,
         gcs_link=args.gcs, mission_path=args.mission, watch_dir=watch, work_dir=args.work_dir,
-        replan_on_new_forecast=replan_on_new, replan_period_s=period_s,
+        replan_on_new_forecast=replan_on_new, replan_period_s=period_s, signing=key,
     )
     table = plan.table
     assert table is not None
     meta = {"executive": {"table": ",".join(str(p) for p in args.table), "table_crc32": f"{table.crc32:08x}",
                           "link": args.link, "gcs": args.gcs or "", "mission": str(args.mission or ""),
-                          "forecast_identity": table.forecast_identity, "forecast_time": table.forecast_time or ""}}
+                          "forecast_identity": table.forecast_identity, "forecast_time": table.forecast_time or "",
+                          "signing": "off" if key is None else f"required, key {key.fingerprint}"}}
     try:
         executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta)
     except OSError as exc:
@@ -120,8 +131,9 @@ def _exec(args: argparse.Namespace) -> int:
         signal.signal(sig, lambda *_: stop.set())
     if not args.quiet:
         gcs = f", ground station on {args.gcs}" if args.gcs else ""
-        print(f"lrauv exec: {len(plan.goals)} goal(s), table crc {table.crc32:08x}, link {args.link}{gcs}, log {log_path}",
-              flush=True)
+        signed = "" if key is None else f", signing required (key {key.fingerprint})"
+        print(f"lrauv exec: {len(plan.goals)} goal(s), table crc {table.crc32:08x}, link {args.link}{gcs}{signed},"
+              f" log {log_path}", flush=True)
     s = executive.run(stop)
     if not args.quiet:
         energy = "unknown" if s.energy_used_wh is None else f"{s.energy_used_wh:.1f} Wh"
@@ -136,6 +148,9 @@ def _exec(args: argparse.Namespace) -> int:
         if executive.swaps:
             print(f"plans      {len(executive.swaps)} swapped in: "
                   + "; ".join(f"{w.get('source')} -> goal {w['goal_index']} table {w['table_crc32']}" for w in executive.swaps))
+        if executive.signature_refusals:
+            print("signing    refused " + ", ".join(f"{n:,} {verdict.value}"
+                                                     for verdict, n in executive.signature_refusals.items()))
         print(f"log        {s.log_path}", flush=True)
     return 0 if s.reached or not args.exit_on_arrival else 1
 

@@ -25,9 +25,11 @@ from typing import Any
 
 from executive import mavlink_bridge as bridge
 from executive import plans
+from executive import signing
 from executive.clock import VehicleClock
 from executive.helm import HelmConfig, HelmState, step, swapped
 from executive.latency import LatencyHistogram
+from executive.mission_protocol import addressed_to
 from executive.plans import MissionPlan
 from executive.recorder import Recorder, Topic
 from executive.replanner import ForecastWatcher, PlanJob, PlanResult, Replanner
@@ -59,6 +61,7 @@ class ExecConfig:
     work_dir: Path | None = None  # uploaded forecasts and onboard plans (default: beside the log)
     replan_on_new_forecast: bool = True
     replan_period_s: float | None = None  # vehicle seconds between replans on the latest forecast
+    signing: signing.SigningKey | None = None  # MAVLink 2 signing: required of uploads and commands, used on all we send
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,14 +99,22 @@ class Executive:
             table = plans.single(table, on_arrival=config.helm.on_arrival)
         self.plan: MissionPlan | None = table
         self.helm_config = self._config_for(self.plan)
+        # Signing (executive.signing): one stream table for both links, as ArduPilot's; refusals by verdict.
+        self.streams = None if config.signing is None else signing.Streams(config.signing)
+        self.signature_refusals: dict[signing.Verdict, int] = {}
+        self._refusal_logs: dict[tuple[signing.Verdict, signing.Link], signing.RefusalLog] = {}
         self.conn = mavutil.mavlink_connection(config.link, source_system=bridge.EXECUTIVE_SYSTEM,
                                                source_component=bridge.EXECUTIVE_COMPONENT)
-        self.mav = bridge.new_mav(self.conn)
+        self.mav = bridge.new_mav(self.conn, streams=self.streams, link_id=signing.LINK_ID_AUTOPILOT)
         self.gcs = None
         if config.gcs_link is not None:
             self.gcs = mavutil.mavlink_connection(config.gcs_link, source_system=bridge.EXECUTIVE_SYSTEM,
                                                   source_component=bridge.EXECUTIVE_COMPONENT)
-            self.gcs_mav = bridge.new_mav(self.gcs)
+            self.gcs_mav = bridge.new_mav(self.gcs, streams=self.streams, link_id=signing.LINK_ID_GROUND_STATION)
+        # UDP carries whole frames in each datagram: the parser starts afresh with each, so the tail of
+        # a cut frame can never join the next datagram's bytes into a frame nobody sent (TCP is a stream).
+        self._datagrams = isinstance(self.conn, mavutil.mavudp)
+        self._gcs_datagrams = self.gcs is not None and isinstance(self.gcs, mavutil.mavudp)
         self.clock = VehicleClock()
         self.vehicle = VehicleState()
         self.helm = HelmState()
@@ -208,6 +219,8 @@ class Executive:
             except Exception:  # pymavlink raises on some malformed frames even when robust
                 self._counts["bad"] += 1
                 msgs = []
+            if self._datagrams:
+                bridge.end_datagram(self.mav)
             wall = time.monotonic()
             for msg in msgs:
                 decided = self._on_message(msg, wall)
@@ -231,16 +244,42 @@ class Executive:
                 msgs = self.gcs_mav.parse_buffer(bytes(data)) or []
             except Exception:  # as in _drain: a malformed frame is counted, never raised
                 self._counts["bad"] += 1
-                continue
+                msgs = []
+            if self._gcs_datagrams:
+                bridge.end_datagram(self.gcs_mav)
             now_s = self.clock.now_s(time.monotonic())
             for msg in msgs:
-                if msg.get_type() == "BAD_DATA":
+                if msg.get_msgId() < 0:  # as in _on_message
                     self._counts["bad"] += 1
                     continue
                 self._counts["in"] += 1
+                if not self._admitted(msg, signing.Link.GROUND_STATION, now_s, from_autopilot=False):
+                    continue
                 self._log(self._record_rx, now_s, msg)
                 self._upload_message(msg, self.gcs_mav, now_s)
         self._write_later()
+
+    def _admitted(self, msg: Any, link: signing.Link, now_s: float, *, from_autopilot: bool) -> bool:
+        """With a signing key: whether ``msg`` goes on (``signing.must_be_signed``).
+
+        A refusal is counted by verdict and never reaches ``Uploads`` or the raw MAVLink log;
+        the warning (log and STATUSTEXT) is rate-limited per verdict and link (``signing.RefusalLog``).
+        """
+        if self.streams is None:
+            return True
+        verdict = bridge.signature(msg)
+        kind = msg.get_type()
+        if verdict is signing.Verdict.SIGNED or not signing.must_be_signed(
+                kind, link=link, from_autopilot=from_autopilot,
+                for_us=addressed_to(msg, bridge.EXECUTIVE_SYSTEM, bridge.EXECUTIVE_COMPONENT)):
+            return True
+        self.signature_refusals[verdict] = self.signature_refusals.get(verdict, 0) + 1
+        log, covers = signing.note_refusal(self._refusal_logs.get((verdict, link), signing.RefusalLog()), time.monotonic())
+        self._refusal_logs[(verdict, link)] = log
+        if covers is not None:
+            source = (msg.get_srcSystem(), msg.get_srcComponent())
+            self._event(now_s, Event("warning", signing.refusal_text(verdict, kind, source, link, covers)))
+        return False
 
     def _upload_message(self, msg: Any, mav: Any, now_s: float) -> None:
         try:
@@ -264,7 +303,7 @@ class Executive:
     def _on_message(self, msg: Any, wall: float) -> bool:
         """Handle one message; True when it ran a decision."""
         kind = msg.get_type()
-        if kind == "BAD_DATA":
+        if msg.get_msgId() < 0:  # BAD_DATA, or UNKNOWN_n: an id this dialect lacks, so its CRC is unchecked
             self._counts["bad"] += 1
             return False
         self._counts["in"] += 1
@@ -281,6 +320,8 @@ class Executive:
             self.helm = HelmState()
             self._last_time.clear()
         now_s = self.clock.now_s(wall)
+        if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
+            return False
         self._log(self._record_rx, now_s, msg)
         if not mine:
             if kind in Uploads.MESSAGES:  # a ground station routed through the autopilot

@@ -4,13 +4,17 @@ Telemetry from the autopilot becomes ``VehicleState`` updates (degE7, mm, cdeg,
 cm/s converted here and nowhere else), and ``Command`` objects become MAVLink
 messages with ArduSub's conventions (research/executive-anchors.md sections
 2.1 to 2.3, research/ardusub-sitl-facts.md). This is the executive's only
-pymavlink import.
+pymavlink import. With a signing key, ``new_mav`` gives a ``SigningMAVLink``: it
+signs what it sends and gives every message it decodes a ``signature`` verdict
+(``executive.signing``).
 """
 
 from __future__ import annotations
 
 import math
 import os
+import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -18,6 +22,7 @@ os.environ.setdefault("MAVLINK20", "1")  # MAVLink 2 framing (pymavlink reads th
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
+from executive.signing import Streams, Verdict, is_signed, timestamp_at  # noqa: E402
 from executive.state import (  # noqa: E402
     Arm,
     Command,
@@ -49,11 +54,71 @@ _SEVERITY = {"debug": mavlink.MAV_SEVERITY_DEBUG, "info": mavlink.MAV_SEVERITY_I
              "warning": mavlink.MAV_SEVERITY_WARNING, "error": mavlink.MAV_SEVERITY_ERROR}
 
 
-def new_mav(sink: Any, *, system: int = EXECUTIVE_SYSTEM, component: int = EXECUTIVE_COMPONENT) -> mavlink.MAVLink:
-    """A MAVLink 2 encoder/parser writing frames to ``sink.write(bytes)``."""
-    mav = mavlink.MAVLink(sink, srcSystem=system, srcComponent=component)
+def new_mav(sink: Any, *, system: int = EXECUTIVE_SYSTEM, component: int = EXECUTIVE_COMPONENT,
+            streams: Streams | None = None, link_id: int = 0) -> mavlink.MAVLink:
+    """A MAVLink 2 encoder/parser writing frames to ``sink.write(bytes)``; signing with ``streams``' key."""
+    if streams is None:
+        mav = mavlink.MAVLink(sink, srcSystem=system, srcComponent=component)
+    else:
+        mav = SigningMAVLink(sink, system=system, component=component, streams=streams, link_id=link_id)
     mav.robust_parsing = True  # skip garbage instead of raising on every bad byte
     return mav
+
+
+class SigningMAVLink(mavlink.MAVLink):
+    """pymavlink's MAVLink, signing everything it sends and judging everything it decodes.
+
+    pymavlink does the framing and ``sign_packet``; the verdict on a received frame is
+    ``Streams.admit``'s (signature first, then timestamp), through pymavlink's own hook
+    ``check_signature``, called by ``decode`` for signed frames of known types. Nothing is
+    dropped here: ``allow_unsigned_callback`` lets every frame through and ``signature(msg)``
+    tells the loop what it is worth, so the loop, which knows the link, the sender and the
+    addressee, decides and logs.
+    """
+
+    def __init__(self, sink: Any, *, system: int, component: int, streams: Streams, link_id: int,
+                 wall_unix_s: Callable[[], float] = time.time) -> None:
+        super().__init__(sink, srcSystem=system, srcComponent=component)
+        self._streams = streams
+        self._wall_unix_s = wall_unix_s
+        self._verdict: Verdict | None = None
+        self.signing.secret_key = streams.key.secret
+        self.signing.link_id = link_id
+        self.signing.sign_outgoing = True
+        self.signing.timestamp = streams.next_send_ticks(0, wall_ticks=timestamp_at(wall_unix_s()))
+        self.signing.allow_unsigned_callback = lambda _mav, _msg_id: True  # the loop decides (above)
+
+    def check_signature(self, msgbuf: bytearray, srcSystem: int, srcComponent: int) -> bool:  # noqa: N803 (pymavlink's names)
+        self._verdict = self._streams.admit(bytes(msgbuf), wall_ticks=timestamp_at(self._wall_unix_s()))
+        return self._verdict is Verdict.SIGNED
+
+    def decode(self, msgbuf: bytearray) -> Any:
+        self._verdict = None
+        msg = super().decode(msgbuf)
+        if self._verdict is None:  # unsigned, or a type pymavlink does not know (decoded before any check)
+            frame = bytes(msgbuf)
+            self._verdict = (self._streams.admit(frame, wall_ticks=timestamp_at(self._wall_unix_s()))
+                             if is_signed(frame) else Verdict.UNSIGNED)
+        msg._lrauv_signature = self._verdict
+        return msg
+
+    def send(self, mavmsg: Any, force_mavlink1: bool = False) -> None:
+        wall = timestamp_at(self._wall_unix_s())
+        self.signing.timestamp = self._streams.next_send_ticks(self.signing.timestamp, wall_ticks=wall)
+        super().send(mavmsg, force_mavlink1=force_mavlink1)
+        self._streams.sent(self.signing.timestamp)  # pymavlink added 1 per frame
+
+
+def signature(msg: Any) -> Verdict:
+    """A decoded message's signing verdict (UNSIGNED when it came through a MAVLink without a key)."""
+    return getattr(msg, "_lrauv_signature", Verdict.UNSIGNED)
+
+
+def end_datagram(mav: mavlink.MAVLink) -> None:
+    """Drop what the parser holds of an unfinished frame: a datagram's bytes never join the next one's."""
+    mav.buf = bytearray()
+    mav.buf_index = 0
+    mav.expected_length = mavlink.HEADER_LEN_V1 + 2  # pymavlink's state between frames
 
 
 def from_autopilot(msg: Any, system: int = AUTOPILOT_SYSTEM) -> bool:

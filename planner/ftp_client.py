@@ -30,6 +30,10 @@ class FtpUploadError(PlannerError):
     """An upload that failed: the message says which step, and the NAK code or the timeout."""
 
 
+class FtpTimeoutError(FtpUploadError):
+    """No reply after every resend: the vehicle is silent, unreachable, or refused our frames unread (signing)."""
+
+
 def _reply_seq(req: Frame) -> int:
     return (req.seq + 1) & 0xFFFF  # "Payload Format": a reply carries the request's seq + 1
 
@@ -84,7 +88,7 @@ class _Link:
         return None
 
     def give_up(self, req: Frame, what: str) -> FtpUploadError:
-        return FtpUploadError(f"{what}: no reply from system {self.target[0]} component {self.target[1]} to "
+        return FtpTimeoutError(f"{what}: no reply from system {self.target[0]} component {self.target[1]} to "
                               f"{Opcode(req.opcode).name} after {self.retries + 1} tries of {self.timeout_s:g} s each")
 
 

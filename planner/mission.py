@@ -86,6 +86,21 @@ class Safety:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Signing:
+    """Where the MAVLink 2 signing key comes from; never the key itself (docs/missions.md, "Signing").
+
+    Exactly one of ``key_file`` and ``passphrase_env``. The key is read when it is used
+    (``lrauv exec``, ``lrauv upload``: ``executive.signing.load_key``), not here, so that
+    planning a mission never needs it; ``where`` names the mission line for those errors.
+    """
+
+    key_file: Path | None = None  # 32 raw bytes or 64 hex digits; relative to the mission's folder; ~ expanded
+    passphrase_env: str | None = None  # a variable holding a passphrase: key = sha256(passphrase), as MAVProxy's
+    link_id: int = 0  # the link id `lrauv upload` signs with (give each ground station its own)
+    where: str = ""  # "missions/x.yaml:31 signing.key_file"
+
+
+@dataclass(frozen=True, kw_only=True)
 class Mission:
     name: str
     path: Path
@@ -96,6 +111,13 @@ class Mission:
     goals: tuple[MissionGoal, ...]
     replanning: Replanning
     safety: Safety
+    signing: Signing | None = None  # None: uploads and commands are not signed
+
+
+MAX_MISSION_BYTES = 1 << 20  # a mission is a few kB; 1,000 goals are about 80 kB
+MAX_VALUES = 100_000  # values in the document once YAML aliases are expanded (a "billion laughs" bomb)
+# libyaml's composer where PyYAML was built with it: 7 times faster, the same nodes and marks.
+_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 class _Doc:
@@ -104,18 +126,27 @@ class _Doc:
     def __init__(self, path: Path, text: str) -> None:
         self.path = path
         self.lines: dict[str, int] = {}
+        self.n_values = 0
         try:
-            node = yaml.compose(text, Loader=yaml.SafeLoader)
+            node = yaml.compose(text, Loader=_LOADER)
+        except yaml.reader.ReaderError as exc:  # a character YAML does not allow (NUL, other controls)
+            line = text.count("\n", 0, exc.position) + 1
+            raise MissionError(f"{path}:{line}: not valid YAML: character #x{exc.character:04x} is not allowed"
+                               f" in YAML ({exc.reason})") from None
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             line = f":{mark.line + 1}" if mark is not None else ""
-            problem = getattr(exc, "problem", None) or str(exc)
+            problem = " ".join((getattr(exc, "problem", None) or str(exc)).split())
             raise MissionError(f"{path}{line}: not valid YAML: {problem}") from None
         if node is None:
             raise MissionError(f"{path}: the file is empty; expected a mission mapping")
         self.root = self._build(node, "")
 
     def _build(self, node: yaml.Node, key: str) -> Any:
+        self.n_values += 1
+        if self.n_values > MAX_VALUES:
+            raise MissionError(f"{self.path}:{node.start_mark.line + 1}: more than {MAX_VALUES:,} values once YAML"
+                               " aliases are expanded; a mission needs far fewer (an alias bomb?)")
         self.lines.setdefault(key, node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             out: dict[str, Any] = {}
@@ -225,13 +256,18 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     """Read and validate a mission file; raise MissionError naming file, line and key."""
     p = Path(path)
     try:
+        size = p.stat().st_size
+        if size > MAX_MISSION_BYTES:
+            raise MissionError(f"{p}: {size:,} bytes; a mission file is at most {MAX_MISSION_BYTES:,} bytes"
+                               f" ({MAX_GOALS} goals fit in a tenth of that)")
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise MissionError(f"{p}: no such mission file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise MissionError(f"{p}: cannot read: {exc}") from None
     doc = _Doc(p, text)
-    top = _Section(doc, doc.root, "", {"name", "forecast", "region", "vehicle", "planning", "goals", "replanning", "safety"})
+    top = _Section(doc, doc.root, "", {"name", "forecast", "region", "vehicle", "planning", "goals", "replanning", "safety",
+                                       "signing"})
     base = p.parent
 
     fc = top.section("forecast", {"file", "directory", "synthetic", "time", "time_index", "variables", "grid_file"})
@@ -360,4 +396,24 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     return Mission(
         name=top.text("name"), path=p, forecast=forecast, region=region, vehicle=vehicle, settings=settings,
         goals=tuple(goals), replanning=replanning, safety=safety,
+        signing=_signing(doc, top, base) if top.has("signing") else None,
     )
+
+
+def _signing(doc: _Doc, top: _Section, base: Path) -> Signing:
+    sg = top.section("signing", {"key_file", "passphrase_env", "link_id"})
+    sources = [k for k in ("key_file", "passphrase_env") if sg.has(k)]
+    if len(sources) != 1:
+        raise doc.error("signing", f"expected exactly one of key_file or passphrase_env (the key itself never goes"
+                                   f" in a mission file); got {sources or 'none'}")
+    name = sources[0]
+    value = sg.text(name)
+    if name == "passphrase_env" and not value.replace("_", "").isalnum():
+        raise doc.error("signing.passphrase_env", f"expected the name of an environment variable; got {value!r}")
+    link_id = sg.integer("link_id", 0, minimum=0)
+    if link_id > 255:
+        raise doc.error("signing.link_id", f"expected 0 to 255; got {link_id}")
+    line = doc.lines.get(f"signing.{name}")
+    return Signing(key_file=base / Path(value).expanduser() if name == "key_file" else None,
+                   passphrase_env=value if name == "passphrase_env" else None,
+                   link_id=link_id, where=f"{doc.path}:{line} signing.{name}")

@@ -8,6 +8,11 @@
 
 The executive checks each part and refuses it with a reason (sent as STATUSTEXT and
 logged); a refused part never replaces the running plan. Any refusal here exits 2.
+
+With a signing key (the mission's ``signing`` section, or ``--signing-key-file``) every
+frame is signed (pymavlink's ``setup_signing``, link id from the mission) and only replies
+signed with the same key are read: an executive with another key, or none, looks silent,
+and the error then says which of the two it saw (pymavlink's signing counters).
 """
 
 from __future__ import annotations
@@ -36,15 +41,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     up.add_argument("--target-system", type=int, help="the executive's MAVLink system (default 1)")
     up.add_argument("--target-component", type=int, help="the executive's MAVLink component (default 191)")
     up.add_argument("--timeout-s", type=float, default=5.0, help="MAVLink FTP: seconds to wait for each reply before resending (default 5)")
+    up.add_argument("--signing-key-file", type=Path, metavar="KEY",
+                    help="MAVLink 2 signing key (32 bytes, or 64 hex digits) to sign with"
+                         " (default: the mission's signing section; docs/missions.md)")
     up.add_argument("--quiet", action="store_true")
 
 
 def run(args: argparse.Namespace) -> int:
     from executive import plans
+    from planner.ftp_client import FtpTimeoutError
     from planner.mission import load_mission
+    from planner.mission_client import MissionTransferError
     from planner.table import PolicyTable, read_table_file
 
     mission = load_mission(args.mission)
+    key, link_id = _signing(args, mission)
     files = {str(path): read_table_file(path) for path in args.table}
     tables = {name: PolicyTable.from_bytes(data, name=name) for name, data in files.items()}
     plan = plans.assign(mission.goals, tables.items(), str(args.mission))
@@ -59,10 +70,56 @@ def run(args: argparse.Namespace) -> int:
                     blobs[n] = _plan_goal(args.mission, goal.goal, args.forecast, Path(tmp) / f"goal-{n}.lrpt")
         conn = _connect(args.to)
         try:
-            _send(conn, mission, blobs, args, say)
+            if key is not None:
+                _sign(conn, key, link_id)
+                say(f"signing with key {key.fingerprint}, link id {link_id}")
+            try:
+                _send(conn, mission, blobs, args, say)
+            except (MissionTransferError, FtpTimeoutError) as exc:  # no answer: say what signing may have to do with it
+                diagnosis = _signing_diagnosis(conn, signed=key is not None)
+                if (isinstance(exc, MissionTransferError) and exc.result is not None) or not diagnosis:
+                    raise
+                raise type(exc)(f"{exc}; {diagnosis}") from None
         finally:
             conn.close()
     return 0
+
+
+def _signing(args: argparse.Namespace, mission):  # type: ignore[no-untyped-def]
+    """The key to sign with (``--signing-key-file`` first, then the mission's) and the link id, or (None, 0)."""
+    from executive.signing import load_key
+
+    sg = mission.signing
+    link_id = sg.link_id if sg is not None else 0
+    if args.signing_key_file is not None:
+        return load_key(key_file=args.signing_key_file, where="--signing-key-file"), link_id
+    if sg is None:
+        return None, 0
+    return load_key(key_file=sg.key_file, passphrase_env=sg.passphrase_env, where=sg.where), link_id
+
+
+def _sign(conn, key, link_id: int) -> None:  # type: ignore[no-untyped-def]
+    """Sign every frame; read only frames signed with ``key`` (pymavlink counts the others)."""
+    conn.setup_signing(key.secret, sign_outgoing=True, link_id=link_id,
+                       allow_unsigned_callback=lambda _mav, _msg_id: False)  # counted in reject_count, then dropped
+
+
+def _signing_diagnosis(conn, *, signed: bool) -> str:  # type: ignore[no-untyped-def]
+    """What a silent executive probably means, from pymavlink's signing counters ("" when nothing to say)."""
+    s = conn.mav.signing
+    if not signed:  # sig_count counts signed frames even without a key
+        return ("the vehicle signs its messages, so it probably refuses unsigned uploads: give the mission a signing"
+                " key (docs/missions.md, Signing)") if s.sig_count else ""
+    unsigned = s.reject_count - s.badsig_count  # reject_count counts both kinds of refused frame
+    if s.goodsig_count == 0 and s.badsig_count:
+        return (f"signing: {s.badsig_count} frames from the vehicle failed the signature check: is the executive using"
+                " the same key (compare the key fingerprints both print)?")
+    if s.goodsig_count == 0 and unsigned:
+        return f"signing: the vehicle answered {unsigned} times unsigned: is `lrauv exec` run with the signing key?"
+    if s.goodsig_count == 0:
+        return "signing: nothing came back at all"
+    return ("signing: the vehicle's frames verify but it did not answer: is this computer's clock more than a minute"
+            " behind the vehicle's? (see its log)")
 
 
 def _plan_goal(mission_path: Path, goal, forecast: Path | None, out: Path) -> bytes:  # type: ignore[no-untyped-def]
