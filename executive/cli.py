@@ -21,8 +21,14 @@ from planner.table import PolicyTable, read_table_file
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     ex = sub.add_parser("exec", help="run the onboard executive against a vehicle over MAVLink")
-    ex.add_argument("--table", type=Path, action="append", required=True,
+    ex.add_argument("--table", type=Path, action="append",
                     help="policy table (.lrpt) from `lrauv plan`; repeat for the goals of a multi-goal mission")
+    ex.add_argument("--state-dir", type=Path, metavar="DIR",
+                    help="keep the durable state here (goals, tables, active goal) for --resume"
+                         " (default: the log's name + -state, beside the log)")
+    ex.add_argument("--resume", type=Path, metavar="STATE_DIR",
+                    help="go on after a crash: reload goals, tables and the active goal from this state directory,"
+                         " recover the killed run's log, and write a new one")
     ex.add_argument("--mission", type=Path,
                     help="mission YAML: goals, vehicle figures, safety limits; enables onboard replanning")
     ex.add_argument("--gcs", metavar="ADDRESS",
@@ -70,17 +76,40 @@ def _exec(args: argparse.Namespace) -> int:
     from executive.loop import ExecConfig, Executive
     from executive.signing import load_key
 
-    from executive import plans
+    from executive import durable, plans
 
-    blobs = [read_table_file(p) for p in args.table]
-    tables = [PolicyTable.from_bytes(data, name=str(p)) for p, data in zip(args.table, blobs)]
+    resumed = None
+    if args.resume is not None:
+        resumed = durable.load(args.resume)
+        args.mission = args.mission or resumed.mission_path
+        args.state_dir = args.state_dir or args.resume
+    elif not args.table:
+        raise PlannerError("exec: no table: give --table TABLE.lrpt (or --resume STATE_DIR after a crash)")
+    paths = args.table or []
+    blobs = [read_table_file(p) for p in paths]
+    tables = [PolicyTable.from_bytes(data, name=str(p)) for p, data in zip(paths, blobs)]
     helm = HelmConfig()
     watch, period_s, replan_on_new = args.watch, None, True
     key = None
     if args.signing_key_file is not None:
         key = load_key(key_file=args.signing_key_file, where="--signing-key-file")
-    if args.mission is not None:
-        helm, plan, mission = _mission_setup(args.mission, args.table, tables, args.on_arrival)
+    if resumed is not None:
+        plan = resumed.plan  # the goals and tables in use when the state was saved, not the mission file's
+        tables = [t for t in plan.tables if t is not None]
+        blobs = [resumed.blobs[t.crc32] for t in tables]
+        on_arrival = plan.goal.on_arrival if plan.goal is not None else helm.on_arrival
+        helm = replace(helm, on_arrival=on_arrival)
+        if args.mission is not None:
+            m = _load_mission(args.mission)
+            helm = replace(_helm_figures(m), on_arrival=on_arrival)
+            if watch is None and m.forecast.directory is not None:
+                watch = m.forecast.directory
+            period_s, replan_on_new = m.replanning.period_s, m.replanning.on_new_forecast
+            if key is None and m.signing is not None:
+                key = load_key(key_file=m.signing.key_file, passphrase_env=m.signing.passphrase_env,
+                               where=m.signing.where)
+    elif args.mission is not None:
+        helm, plan, mission = _mission_setup(args.mission, paths, tables, args.on_arrival)
         if watch is None and mission.forecast.directory is not None:
             watch = mission.forecast.directory
         period_s, replan_on_new = mission.replanning.period_s, mission.replanning.on_new_forecast
@@ -109,19 +138,28 @@ def _exec(args: argparse.Namespace) -> int:
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise PlannerError(f"--{name.replace('_', '-')}: expected a non-negative number; got {value}")
     log_path = args.log or Path("out") / time.strftime("exec-%Y%m%dT%H%M%SZ.mcap", time.gmtime())
+    recovered = None
+    if resumed is not None:
+        log_path, recovered = _resume_log(resumed.log_path, args.log)
     log_path.parent.mkdir(parents=True, exist_ok=True)
+    state_dir = args.state_dir or log_path.with_name(log_path.stem + "-state")
     config = ExecConfig(
         link=args.link, log_path=log_path, helm=helm, exit_on_arrival=args.exit_on_arrival, linger_s=args.linger_s,
         max_wall_s=args.max_wall_s, max_vehicle_s=None if args.max_vehicle_h is None else args.max_vehicle_h * 3600.0,
         gcs_link=args.gcs, mission_path=args.mission, watch_dir=watch, work_dir=args.work_dir,
-        replan_on_new_forecast=replan_on_new, replan_period_s=period_s, signing=key,
+        replan_on_new_forecast=replan_on_new, replan_period_s=period_s, signing=key, state_dir=state_dir,
     )
     table = plan.table
     assert table is not None
-    meta = {"executive": {"table": ",".join(str(p) for p in args.table), "table_crc32": f"{table.crc32:08x}",
+    meta = {"executive": {"table": ",".join(str(p) for p in paths), "table_crc32": f"{table.crc32:08x}",
                           "link": args.link, "gcs": args.gcs or "", "mission": str(args.mission or ""),
                           "forecast_identity": table.forecast_identity, "forecast_time": table.forecast_time or "",
-                          "signing": "off" if key is None else f"required, key {key.fingerprint}"}}
+                          "signing": "off" if key is None else f"required, key {key.fingerprint}",
+                          "state_dir": str(state_dir)}}
+    if resumed is not None:
+        meta["resumed"] = {"state_dir": str(args.resume), "saved_utc": resumed.saved_utc,
+                           "goal_index": str(plan.index), "previous_log": str(resumed.log_path or ""),
+                           "recovered": recovered or ""}
     try:
         executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta)
     except OSError as exc:
@@ -132,6 +170,9 @@ def _exec(args: argparse.Namespace) -> int:
     if not args.quiet:
         gcs = f", ground station on {args.gcs}" if args.gcs else ""
         signed = "" if key is None else f", signing required (key {key.fingerprint})"
+        if resumed is not None:
+            print(f"resumed    from {args.resume} (saved {resumed.saved_utc}): goal {plan.index} of {len(plan.goals)};"
+                  f" previous log {recovered or 'absent'}", flush=True)
         print(f"lrauv exec: {len(plan.goals)} goal(s), table crc {table.crc32:08x}, link {args.link}{gcs}{signed},"
               f" log {log_path}", flush=True)
     s = executive.run(stop)
@@ -155,12 +196,51 @@ def _exec(args: argparse.Namespace) -> int:
     return 0 if s.reached or not args.exit_on_arrival else 1
 
 
+def _resume_log(previous: Path | None, given: Path | None) -> tuple[Path, str | None]:
+    """The new log's path, and what became of the killed run's log (recovered up to its last record)."""
+    from executive.recorder import is_complete, recover
+
+    note = None
+    if previous is not None and previous.exists():
+        if given is not None and given.resolve() == previous.resolve():
+            raise PlannerError(f"--log {given}: that is the killed run's log; give the resumed run another file")
+        if is_complete(previous):
+            note = f"{previous} (complete)"
+        else:
+            r = recover(previous)
+            last = "none" if r.last_log_time_s is None else f"{r.last_log_time_s:.1f} s"
+            note = (f"{previous}: {r.messages:,} messages up to vehicle time {last} recovered into {r.output}"
+                    f" (cut at byte {r.truncated_at_byte:,})")
+    if given is not None:
+        return given, note
+    base = previous if previous is not None else Path("out") / "exec.mcap"
+    n = 1
+    while (path := base.with_name(f"{base.stem}-resumed-{n}.mcap")).exists():
+        n += 1
+    return path, note
+
+
+def _load_mission(mission_path: Path):  # type: ignore[no-untyped-def]
+    from planner.mission import load_mission
+
+    return load_mission(mission_path)
+
+
+def _helm_figures(m) -> HelmConfig:  # type: ignore[no-untyped-def]
+    """The helm's vehicle figures and safety limits from a mission."""
+    v, s = m.vehicle, m.safety
+    return HelmConfig(
+        cruise_speed_m_s=v.cruise_speed_m_s, yaw_rate_deg_s=v.yaw_rate_deg_s, glide_rate_m_s=v.glide_rate_m_s,
+        link_loss_timeout_s=s.link_loss_timeout_s, max_mission_time_s=s.max_mission_time_s,
+        min_battery_pct=s.min_battery_pct, max_depth_m=s.max_depth_m, geofence=s.geofence, on_breach=s.on_breach,
+    )
+
+
 def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTable], on_arrival: str | None):  # type: ignore[no-untyped-def]
     """The helm's figures and the goal list from the mission; each table must serve one of its goals."""
     from executive import plans
-    from planner.mission import load_mission
 
-    m = load_mission(mission_path)
+    m = _load_mission(mission_path)
     goals = m.goals
     if on_arrival:  # the mission's end; goals before it keep theirs (``next``)
         goals = (*goals[:-1], replace(goals[-1], on_arrival=on_arrival))  # type: ignore[arg-type]
@@ -169,10 +249,4 @@ def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTab
         first = goals[0].goal
         raise PlannerError(f"--table: none is for goals[0] of {mission_path} ({first.lon_deg:g}, {first.lat_deg:g},"
                            f" {first.depth_m:g} m): plan it with `lrauv plan {mission_path}`")
-    v, s = m.vehicle, m.safety
-    helm = HelmConfig(
-        cruise_speed_m_s=v.cruise_speed_m_s, yaw_rate_deg_s=v.yaw_rate_deg_s, glide_rate_m_s=v.glide_rate_m_s,
-        on_arrival=goals[0].on_arrival, link_loss_timeout_s=s.link_loss_timeout_s, max_mission_time_s=s.max_mission_time_s,
-        min_battery_pct=s.min_battery_pct, max_depth_m=s.max_depth_m, geofence=s.geofence, on_breach=s.on_breach,
-    )
-    return helm, plan, m
+    return replace(_helm_figures(m), on_arrival=goals[0].on_arrival), plan, m

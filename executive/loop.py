@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import plans
+from executive import durable, plans
 from executive import signing
 from executive.clock import VehicleClock
 from executive.helm import HelmConfig, HelmState, step, swapped
@@ -62,6 +62,7 @@ class ExecConfig:
     replan_on_new_forecast: bool = True
     replan_period_s: float | None = None  # vehicle seconds between replans on the latest forecast
     signing: signing.SigningKey | None = None  # MAVLink 2 signing: required of uploads and commands, used on all we send
+    state_dir: Path | None = None  # durable state for a restart (executive.durable): saved at start and every swap
 
 
 @dataclass(frozen=True, slots=True)
@@ -148,12 +149,14 @@ class Executive:
         # the active goal and every table's exact bytes.
         self.recorder.metadata("helm", {"config": self.helm_config.to_json(),
                                         "goal_index": str(self.plan.index if self.plan is not None else 0)})
+        self._blobs: dict[int, bytes] = {}  # every table's exact bytes, for the durable state
         if self.plan is not None and self.plan.table is not None:
             blobs = table_bytes or {}
             for index, table_n in enumerate(self.plan.tables):
                 if table_n is not None:
-                    self._record_policy(table_n, blobs.get(table_n.crc32) or table_n.to_bytes(), "loaded",
-                                        goal_index=index)
+                    self._blobs[table_n.crc32] = blobs.get(table_n.crc32) or table_n.to_bytes()
+                    self._record_policy(table_n, self._blobs[table_n.crc32], "loaded", goal_index=index)
+            self._save_state(0.0)
         else:
             self._event(0.0, Event("error", "no policy table: the vehicle will be surfaced"))
 
@@ -417,6 +420,7 @@ class Executive:
             record["forecast"] = {"identity": new.table.forecast_identity, "time": new.table.forecast_time}
         self.swaps.append(record)
         self._log(self.recorder.write, Topic.POLICY, now_s, record)
+        self._log(self._save_state, now_s)  # after this decision's commands are out
         prev = record["previous"]["table_crc32"]
         self._event(now_s, Event("info", f"plan swapped ({note.get('source', '?')}): goal {new.index},"
                                          f" table {prev} -> {record['table_crc32']}"))
@@ -591,7 +595,18 @@ class Executive:
             record["goal_index"] = goal_index
         self.recorder.write(Topic.POLICY, now_s, record)
         if table_bytes is not None:
+            self._blobs[table.crc32] = table_bytes
             self.recorder.attach(f"policy-{table.crc32:08x}.lrpt", table_bytes)
+
+    def _save_state(self, now_s: float) -> None:
+        """The durable state (executive.durable): goals, tables and the active goal, for a restart."""
+        if self.config.state_dir is None or self.plan is None:
+            return
+        try:
+            durable.save(self.config.state_dir, self.plan, self._blobs, log_path=self.config.log_path,
+                         mission_path=self.config.mission_path)
+        except OSError as exc:  # the mission goes on; a restart would resume from the last state saved
+            self._event(now_s, Event("error", f"cannot save the state to {self.config.state_dir}: {exc.strerror or exc}"))
 
     # -- time-driven work --------------------------------------------------------------------
 

@@ -39,7 +39,7 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 from planner.atomic import atomic_target
 from planner.errors import PlannerError
 
-__all__ = ["LogError", "LogLevel", "RecordStream", "Recorder", "Recovery", "Topic", "check_head", "read_messages", "recover"]
+__all__ = ["LogError", "LogLevel", "RecordStream", "Recorder", "Recovery", "Topic", "check_head", "is_complete", "read_messages", "recover"]
 
 _MAGIC = b"\x89MCAP0\r\n"  # MCAP spec, "Magic"
 _FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
@@ -523,6 +523,15 @@ def _has_footer(f: BinaryIO, size: int) -> bool:
     tail = f.read(_FOOTER_BYTES + len(_MAGIC))
     opcode, length = struct.unpack_from("<BQ", tail)
     return tail[-len(_MAGIC):] == _MAGIC and opcode == _FOOTER_OPCODE and length == _FOOTER_BYTES - 9
+
+
+def is_complete(path: str | os.PathLike[str]) -> bool:
+    """Whether the log ends with its footer (the writer closed it); False for a cut or unreadable file."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(_MAGIC)) == _MAGIC and _has_footer(f, os.fstat(f.fileno()).st_size)
+    except OSError:
+        return False
 
 
 def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = None
