@@ -1,16 +1,13 @@
 """The closed loop over real UDP on 127.0.0.1: ``lrauv sim`` as a process, the executive in a thread.
 
-Between them, where a test needs it, a UDP relay that can drop, duplicate and
-reorder datagrams or cut one direction, and that reads the simulator's side of
-the conversation (modes, STATUSTEXT) as a ground station would. Every process
-and thread a test starts is stopped by it.
+Between them, where a test needs it, ``tests.linkfault.LinkFaultProxy``: a UDP
+proxy that can drop, duplicate and reorder datagrams or cut one direction, and
+that reads the simulator's side of the conversation (modes, STATUSTEXT) as a
+ground station would. Every process and thread a test starts is stopped by it.
 """
 
 from __future__ import annotations
 
-import os
-import random
-import socket
 import subprocess
 import sys
 import threading
@@ -19,17 +16,14 @@ from pathlib import Path
 
 import pytest
 
-os.environ.setdefault("MAVLINK20", "1")
-from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
-
-from executive.helm import HelmConfig  # noqa: E402
-from executive.loop import ExecConfig, Executive  # noqa: E402
-from executive.recorder import read_messages  # noqa: E402
-from executive.state import SubMode  # noqa: E402
-from vehicle_sim.cli import wait_ready  # noqa: E402
-from vehicle_sim.demo import stop_process  # noqa: E402
-
-from tests.helpers import assert_audit_clean, start_west_of_goal, wait_until  # noqa: E402
+from executive.helm import HelmConfig
+from executive.loop import ExecConfig, Executive
+from executive.recorder import read_messages
+from executive.state import SubMode
+from tests.helpers import assert_audit_clean, start_west_of_goal, wait_until
+from tests.linkfault import Faults, LinkFaultProxy
+from vehicle_sim.cli import wait_ready
+from vehicle_sim.demo import stop_process
 
 REPO = Path(__file__).resolve().parents[1]
 LRAUV = [sys.executable, "-m", "planner.cli"]
@@ -56,83 +50,6 @@ class Sim:
     def stop(self) -> int:
         stop_process(self.proc)
         return self.proc.returncode
-
-
-class Relay:
-    """A UDP relay executive <-> simulator with faults; it also listens in on the simulator's side."""
-
-    def __init__(self, sim_port: int, *, seed: int = 7) -> None:
-        self.front = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # the executive talks to this
-        self.front.bind(("127.0.0.1", 0))
-        self.back = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # this talks to the simulator
-        self.back.bind(("127.0.0.1", 0))
-        self.port = self.front.getsockname()[1]
-        self.sim = ("127.0.0.1", sim_port)
-        self.exec_addr: tuple[str, int] | None = None
-        self.rng = random.Random(seed)
-        self.drop = 0.0  # simulator -> executive
-        self.duplicate = 0.0
-        self.reorder = 0.0
-        self.cut_down = False  # simulator -> executive blocked
-        self.cut_up = False  # executive -> simulator blocked
-        self.modes: list[tuple[float, int]] = []  # (wall time, custom_mode) of the simulator's heartbeats
-        self.texts: list[str] = []
-        self.counts = {"dropped": 0, "duplicated": 0, "reordered": 0}
-        self._held: bytes | None = None
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        import select
-
-        while not self._stop.is_set():
-            ready, _, _ = select.select([self.front, self.back], [], [], 0.05)
-            for sock in ready:
-                data, addr = sock.recvfrom(65536)
-                if sock is self.front:
-                    self.exec_addr = addr
-                    if not self.cut_up:
-                        self.back.sendto(data, self.sim)
-                else:
-                    self._listen(data)
-                    self._down(data)
-
-    def _listen(self, data: bytes) -> None:
-        for msg in self._parser.parse_buffer(data) or []:
-            if msg.get_type() == "HEARTBEAT" and msg.get_srcComponent() == 1:
-                self.modes.append((time.monotonic(), msg.custom_mode))
-            elif msg.get_type() == "STATUSTEXT":
-                self.texts.append(msg.text)
-
-    def _down(self, data: bytes) -> None:
-        if self.cut_down or self.exec_addr is None:
-            return
-        if self.rng.random() < self.drop:
-            self.counts["dropped"] += 1
-            return
-        if self._held is None and self.rng.random() < self.reorder:
-            self._held = data  # sent after the next datagram
-            self.counts["reordered"] += 1
-            return
-        copies = 2 if self.rng.random() < self.duplicate else 1
-        self.counts["duplicated"] += copies - 1
-        for _ in range(copies):
-            self.front.sendto(data, self.exec_addr)
-        if self._held is not None:
-            self.front.sendto(self._held, self.exec_addr)
-            self._held = None
-
-    def mode(self) -> int | None:
-        return self.modes[-1][1] if self.modes else None
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        self.front.close()
-        self.back.close()
 
 
 class ExecThread:
@@ -186,8 +103,7 @@ def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
 def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan, synthetic_forecast, tmp_path):
     lon, lat = start_west_of_goal(demo_plan.table)
     sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10")
-    relay = Relay(sim.port)
-    relay.drop, relay.duplicate, relay.reorder = 0.25, 0.10, 0.05
+    relay = LinkFaultProxy(sim.port, speedup=SPEEDUP, seed=7, down=Faults(loss=0.25, duplicate=0.10, reorder=0.05))
     ex = None
     try:
         ex = ExecThread(demo_plan.table, relay.port, tmp_path / "lossy.mcap")
@@ -198,7 +114,8 @@ def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan,
         relay.close()
         sim.stop()
     assert summary is not None and summary.reached, summary
-    assert relay.counts["dropped"] > 100 and relay.counts["duplicated"] > 50 and relay.counts["reordered"] > 10
+    down = relay.counters("down")
+    assert down.dropped > 100 and down.duplicated > 50 and down.reordered > 10
     # No decision went back in time although datagrams came twice and out of order.
     times = [p["time_s"] for _, _, p in read_messages(tmp_path / "lossy.mcap", ["/executive/decision"])]
     assert times == sorted(times)
@@ -208,13 +125,13 @@ def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan,
 def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synthetic_forecast, tmp_path):
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "5")
-    relay = Relay(sim.port)
+    relay = LinkFaultProxy(sim.port, speedup=SPEEDUP)
     ex = ExecThread(demo_plan.table, relay.port, tmp_path / "hb.mcap")
     try:
         assert wait_until(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
         time.sleep(0.2)
         ex.stop()  # the executive's process dies: no more heartbeats from component 191
-        assert wait_until(lambda: any("heartbeat lost" in t for t in relay.texts), 20), relay.texts
+        assert wait_until(lambda: any("heartbeat lost" in t for _, t in relay.texts), 20), relay.texts
         assert wait_until(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
     finally:
         ex.stop()
@@ -225,15 +142,15 @@ def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synt
 def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, synthetic_forecast, tmp_path):
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "600")
-    relay = Relay(sim.port)
+    relay = LinkFaultProxy(sim.port, speedup=SPEEDUP)
     ex = ExecThread(demo_plan.table, relay.port, tmp_path / "silent.mcap", link_loss_timeout_s=30.0)
     try:
         assert wait_until(lambda: relay.mode() == SubMode.GUIDED, 30), relay.modes[-3:]
         time.sleep(0.2)
-        relay.cut_down = True  # telemetry no longer reaches the executive; its commands still reach the vehicle
+        relay.cut(up=False, down=True)  # telemetry no longer reaches the executive; its commands still reach the vehicle
         # After 30 s of vehicle time (extrapolated by the executive's clock) it asks for SURFACE.
         assert wait_until(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
-        relay.cut_down = False
+        relay.cut(up=False, down=False)
         summary = ex.stop()
     finally:
         ex.stop()
