@@ -17,6 +17,9 @@ from dataclasses import dataclass
 _RATE_GAIN = 0.2
 # Rate estimates use spans of at least this much wall time (scheduling jitter dominates below).
 _MIN_SPAN_WALL_S = 0.02
+# The first estimate replaces the 1x guess outright, from a shorter span: at a simulator speedup the
+# vehicle is set up within milliseconds, and a link silence right then must be timed at the real rate.
+_FIRST_SPAN_WALL_S = 0.005
 # time_boot_ms going back by more than this is a reboot of the autopilot, not reordering.
 _REBOOT_BACKSTEP_S = 5.0
 
@@ -31,6 +34,7 @@ class VehicleClock:
     _wall_s: float = 0.0
     _anchor_vehicle_s: float | None = None
     _anchor_wall_s: float = 0.0
+    _rated: bool = False  # a rate has been measured (until then ``rate`` is the 1x guess)
     reboots: int = 0
 
     @property
@@ -53,10 +57,11 @@ class VehicleClock:
         self._vehicle_s, self._wall_s = time_boot_s, wall_s
         assert self._anchor_vehicle_s is not None
         span_wall = wall_s - self._anchor_wall_s
-        if span_wall >= _MIN_SPAN_WALL_S:
+        if span_wall >= (_MIN_SPAN_WALL_S if self._rated else _FIRST_SPAN_WALL_S):
             observed = (time_boot_s - self._anchor_vehicle_s) / span_wall
             observed = min(max(observed, 0.0), self.max_rate)
-            self.rate += _RATE_GAIN * (observed - self.rate)
+            self.rate = self.rate + _RATE_GAIN * (observed - self.rate) if self._rated else observed
+            self._rated = True
             self._anchor_vehicle_s, self._anchor_wall_s = time_boot_s, wall_s
         return False
 

@@ -49,6 +49,7 @@ from planner.table import Lookup, PolicyTable
 # horizontal thrust, GUIDED holds a position).
 BREACH_MODE: dict[str, SubMode] = {"surface": SubMode.SURFACE, "drift": SubMode.ALT_HOLD, "hold": SubMode.GUIDED}
 _HEADING_TOLERANCE_DEG = 3.0  # a rotation is complete within this of its target bearing
+_RATE_TRIES = 10  # rate requests sent at most this often per set-up (an autopilot may never acknowledge)
 
 # Telemetry the executive asks for (message, interval in vehicle seconds); position and
 # attitude drive decisions, the rest is health. Intervals <= 0 disable a stream.
@@ -128,7 +129,10 @@ class HelmState:
     target_sent_s: float | None = None
     mode_request_s: float | None = None
     arm_request_s: float | None = None
-    rates_sent: bool = False
+    rates_sent: bool = False  # the rate requests went out in this set-up
+    rates_sent_s: float | None = None
+    rates_acks: int = 0  # the vehicle's count of accepted interval requests when they last went out
+    rates_tries: int = 0
     mission_start_s: float | None = None
 
 
@@ -187,7 +191,8 @@ def step(
     if helm.phase in (Phase.WAIT_LINK, Phase.LINK_LOST):
         text = "autopilot heartbeat received" if helm.phase is Phase.WAIT_LINK else "link regained: setting up again"
         out.events.append(Event("info", text))
-        helm = replace(helm, phase=Phase.SETUP, rates_sent=False, activity=None, target_sent_s=None)
+        helm = replace(helm, phase=Phase.SETUP, rates_sent=False, rates_tries=0, activity=None, target_sent_s=None)
+    helm = _rates(helm, vehicle, config, now_s, out)
     if helm.phase is Phase.SETUP:
         helm = _setup(helm, vehicle, table, config, now_s, out)
         if helm.phase is Phase.SETUP:
@@ -242,12 +247,28 @@ def _link_lost(helm: HelmState, config: HelmConfig, now_s: float, out: _Out) -> 
     return Tick(helm, tuple(out.commands), tuple(out.events))
 
 
+def _rates(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:
+    """Ask for the telemetry rates, and again every ``retry_s`` until each request is acknowledged.
+
+    A lost request would leave its stream at the autopilot's default for the whole run
+    (MAV_CMD_SET_MESSAGE_INTERVAL is not retried by MAVLink itself). Its COMMAND_ACK does not
+    say which message it was for, so the whole set goes again until as many were accepted.
+    """
+    if helm.rates_sent:
+        if (vehicle.interval_acks - helm.rates_acks >= len(config.rates) or helm.rates_tries >= _RATE_TRIES
+                or not _due(helm.rates_sent_s, now_s, config.retry_s)):
+            return helm
+        if helm.rates_tries + 1 == _RATE_TRIES:
+            out.events.append(Event("warning", f"telemetry rates not all acknowledged after {_RATE_TRIES} requests;"
+                                               " asking no more"))
+    out.commands.extend(SetMessageInterval(name, interval) for name, interval in config.rates)
+    return replace(helm, rates_sent=True, rates_sent_s=now_s, rates_acks=vehicle.interval_acks,
+                   rates_tries=helm.rates_tries + 1)
+
+
 def _setup(
     helm: HelmState, vehicle: VehicleState, table: PolicyTable | None, config: HelmConfig, now_s: float, out: _Out
 ) -> HelmState:
-    if not helm.rates_sent:
-        out.commands.extend(SetMessageInterval(name, interval) for name, interval in config.rates)
-        helm = replace(helm, rates_sent=True)
     if not vehicle.has_position:
         return helm
     if table is None:

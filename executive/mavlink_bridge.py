@@ -147,10 +147,11 @@ def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
         heading = v.heading_deg if msg.hdg == _UNKNOWN_HDG else (msg.hdg / 100.0) % 360.0
         depth_m = max(0.0, -msg.relative_alt / 1000.0)  # relative_alt is negative below the surface
         return VehicleState(msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, depth_m, heading, v.mode, v.armed,
-                            v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s)
+                            v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s, v.interval_acks)
     if kind == "ATTITUDE":
         return VehicleState(msg.time_boot_ms / 1000.0, v.lat_deg, v.lon_deg, v.depth_m, math.degrees(msg.yaw) % 360.0,
-                            v.mode, v.armed, v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s)
+                            v.mode, v.armed, v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s,
+                            v.interval_acks)
     if kind == "HEARTBEAT":
         armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         return replace(vehicle, mode=int(msg.custom_mode), armed=armed, heartbeat_s=now_s)
@@ -161,6 +162,9 @@ def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
         wh = None if msg.energy_consumed < 0 else msg.energy_consumed / 36.0  # hJ -> Wh
         return replace(vehicle, battery_pct=pct if pct is not None else vehicle.battery_pct,
                        energy_used_wh=wh if wh is not None else vehicle.energy_used_wh)
+    if (kind == "COMMAND_ACK" and msg.command == mavlink.MAV_CMD_SET_MESSAGE_INTERVAL
+            and msg.result == mavlink.MAV_RESULT_ACCEPTED):
+        return replace(vehicle, interval_acks=vehicle.interval_acks + 1)
     if kind == "SYS_STATUS" and msg.battery_remaining >= 0:
         return replace(vehicle, battery_pct=float(msg.battery_remaining))
     return vehicle

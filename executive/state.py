@@ -66,6 +66,7 @@ class VehicleState:
     battery_pct: float | None = None
     energy_used_wh: float | None = None
     heartbeat_s: float | None = None  # vehicle time of the last autopilot HEARTBEAT
+    interval_acks: int = 0  # COMMAND_ACKs accepting MAV_CMD_SET_MESSAGE_INTERVAL so far
 
     @property
     def has_position(self) -> bool:

@@ -48,7 +48,8 @@ def _vehicle_at(table: PolicyTable, state: tuple[int, int, int, int], **kw) -> V
     l, j, i, k = state
     lat, lon = table.cell_centre(j, i)
     base = dict(time_s=100.0, lat_deg=lat, lon_deg=lon, depth_m=table.depth_m[l], heading_deg=table.bearing_deg(j, k),
-                mode=int(SubMode.GUIDED), armed=True, position_ok=True, heartbeat_s=100.0)
+                mode=int(SubMode.GUIDED), armed=True, position_ok=True, heartbeat_s=100.0,
+                interval_acks=len(CONFIG.rates))  # the autopilot accepted every rate asked for
     base.update(kw)
     return VehicleState(**base)  # type: ignore[arg-type]
 
@@ -309,3 +310,30 @@ def test_geofence_inside_and_outside():
     assert inside(-117.5, 33.5, square) and not inside(-116.9, 33.5, square) and not inside(-117.5, 34.1, square)
     notch = ((0.0, 0.0), (4.0, 0.0), (4.0, 4.0), (2.0, 1.0), (0.0, 4.0))  # concave: the notch is outside
     assert inside(1.0, 0.5, notch) and not inside(2.0, 3.0, notch) and inside(0.5, 3.0, notch)
+
+
+def test_rate_requests_go_again_until_each_is_acknowledged(table):
+    """A lost SET_MESSAGE_INTERVAL would leave its stream at the autopilot's default: ask until all are accepted."""
+    n = len(CONFIG.rates)
+    vehicle = _vehicle_at(table, _state_with(table, Action.FORWARD), interval_acks=0)
+    helm = HelmState(phase=Phase.RUNNING, mission_start_s=0.0)
+
+    def rates(tick):  # type: ignore[no-untyped-def]
+        return [c for c in tick.commands if isinstance(c, SetMessageInterval)]
+
+    first = _run(table, vehicle, helm=helm, now_s=100.0)
+    assert len(rates(first)) == n
+    assert rates(_run(table, vehicle, helm=first.helm, now_s=101.0)) == []  # not before retry_s
+    again = _run(table, vehicle, helm=first.helm, now_s=102.0)
+    assert len(rates(again)) == n  # no acknowledgement: all again
+    partly = replace(vehicle, interval_acks=n - 1)
+    assert len(rates(_run(table, partly, helm=again.helm, now_s=104.0))) == n  # one still missing
+    done = replace(vehicle, interval_acks=n)
+    assert rates(_run(table, done, helm=again.helm, now_s=200.0)) == []  # every one accepted: no more
+    # An autopilot that never acknowledges is asked ten times, then told so once.
+    tick, asked, warned = first, 1, []
+    for t in range(2, 60):
+        tick = _run(table, vehicle, helm=tick.helm, now_s=100.0 + 2.0 * t)
+        asked += bool(rates(tick))
+        warned += [e.text for e in tick.events if "telemetry rates" in e.text]
+    assert asked == 10 and len(warned) == 1
