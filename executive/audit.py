@@ -13,7 +13,7 @@ What the audit mirrors of ``Executive._on_message``: the autopilot's messages
 (system 1, component 1) update the ``VehicleState`` through the same
 ``mavlink_bridge.apply``; a message older than the last of its kind is dropped;
 position and attitude run a decision at their ``time_boot_ms``; a HEARTBEAT
-runs the helm before the policy is being followed. Ticks that have no message
+runs the helm in the set-up phases (``helm.HEARTBEAT_PHASES``). Ticks that have no message
 of their own are found from the events they log: link loss ("link lost: ...")
 and an autopilot reboot ("autopilot time went back ...").
 """
@@ -26,9 +26,9 @@ from typing import Any
 
 from executive import mavlink_bridge as bridge
 from executive.divelog import DiveLog, LogMessage
-from executive.helm import Decision, HelmConfig, HelmState, step, swapped
+from executive.helm import HEARTBEAT_PHASES, Decision, HelmConfig, HelmState, step, swapped
 from executive.recorder import LogError, Topic
-from executive.state import Phase, VehicleState
+from executive.state import VehicleState
 from planner.errors import PlannerError
 from planner.table import PolicyTable
 
@@ -109,7 +109,7 @@ class _Audit:
                 return
             self.last_time[kind] = t_boot
         self.vehicle = bridge.apply(self.vehicle, msg, m.log_time_s)
-        if kind in _DECIDERS or (kind == "HEARTBEAT" and self.helm.phase is not Phase.RUNNING):
+        if kind in _DECIDERS or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
             self.due = (m.log_time_s if t_boot is None else t_boot, True)
 
     def swap(self, p: Mapping[str, Any]) -> None:

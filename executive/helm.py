@@ -49,6 +49,9 @@ from planner.table import Lookup, PolicyTable
 # horizontal thrust, GUIDED holds a position).
 BREACH_MODE: dict[str, SubMode] = {"surface": SubMode.SURFACE, "drift": SubMode.ALT_HOLD, "hold": SubMode.GUIDED}
 _HEADING_TOLERANCE_DEG = 3.0  # a rotation is complete within this of its target bearing
+# Phases in which an autopilot HEARTBEAT runs the helm too: set-up needs no position message
+# to go on. Once the policy is followed, position and attitude alone drive decisions.
+HEARTBEAT_PHASES = frozenset({Phase.WAIT_LINK, Phase.SETUP, Phase.LINK_LOST})
 _RATE_TRIES = 10  # rate requests sent at most this often per set-up (an autopilot may never acknowledge)
 
 # Telemetry the executive asks for (message, interval in vehicle seconds); position and

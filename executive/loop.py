@@ -27,7 +27,7 @@ from executive import mavlink_bridge as bridge
 from executive import durable, plans
 from executive import signing
 from executive.clock import VehicleClock
-from executive.helm import HelmConfig, HelmState, step, swapped
+from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, step, swapped
 from executive.latency import LatencyHistogram
 from executive.mission_protocol import addressed_to
 from executive.plans import MissionPlan
@@ -345,7 +345,7 @@ class Executive:
             self._event(now_s, Event(level, bridge.command_text(msg)))  # type: ignore[arg-type]
         if kind == "GLOBAL_POSITION_INT":
             self._log(self._record_state, now_s, self.vehicle)
-        if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase is not Phase.RUNNING):
+        if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
             self._tick(now_s if t_boot is None else t_boot, link_ok=True)
             return kind in bridge.DECISION_MESSAGES
         return False

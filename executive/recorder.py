@@ -23,6 +23,7 @@ import json
 import math
 import os
 import struct
+import tempfile
 import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
@@ -32,7 +33,8 @@ from typing import Any, BinaryIO, Literal, Self, get_args
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Attachment, Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema
+from mcap.data_stream import RecordBuilder
+from mcap.records import Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
@@ -337,6 +339,7 @@ class Recorder:
             raise LogError(f"{self.path}: cannot open the log for writing: {exc.strerror or exc}") from None
         self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION, index_types=_INDEXES,
                               use_statistics=True, use_summary_offsets=True, enable_crcs=True)
+        self._chunk_indexes = _spool_chunk_indexes(self._writer, self.path.parent)
         self._flush_interval_s = float(flush_interval_s)
         self._channel_ids: dict[Topic, int] = {}
         self._schema_ids: dict[str, int] = {}
@@ -464,6 +467,8 @@ class Recorder:
         finally:
             self._final_size = os.fstat(self._file.fileno()).st_size
             self._file.close()
+            if self._chunk_indexes is not None:
+                self._chunk_indexes.close()
 
     def __enter__(self) -> Self:
         return self
@@ -501,6 +506,59 @@ class Recorder:
 
 
 _NO_COVARIANCE = (0.0,) * 9
+
+
+class _SpooledChunkIndexes:
+    """The writer's chunk indexes, kept in an unlinked temporary file instead of in memory.
+
+    ``mcap.Writer`` keeps one ``ChunkIndex`` per chunk until ``finish`` writes them into the
+    summary. The loop flushes a chunk every second of wall time, so at sea (1x) that is 86,400
+    indexes a vehicle day, several kB each in Python objects: the soak (bench/bench_soak.py)
+    saw the executive grow 5 MB a day at 1000x. Here each index is its record's bytes on disk,
+    read back once at ``finish``; memory stays flat however long the mission.
+    """
+
+    def __init__(self, directory: Path) -> None:
+        self._file = tempfile.TemporaryFile(dir=directory)  # unlinked: a killed process leaves nothing
+        self.count = 0
+
+    def append(self, index: ChunkIndex) -> None:
+        builder = RecordBuilder()
+        index.write(builder)
+        self._file.write(builder.end())
+        self.count += 1
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __iter__(self) -> Iterator[_RawRecord]:
+        self._file.flush()
+        self._file.seek(0)
+        while header := self._file.read(9):
+            _opcode, length = struct.unpack("<BQ", header)
+            yield _RawRecord(header + self._file.read(length))
+        self._file.seek(0, os.SEEK_END)
+
+    def close(self) -> None:
+        self._file.close()
+
+
+@dataclass(frozen=True, slots=True)
+class _RawRecord:
+    data: bytes
+
+    def write(self, builder: RecordBuilder) -> None:
+        builder.write(self.data)
+
+
+def _spool_chunk_indexes(writer: Writer, directory: Path) -> _SpooledChunkIndexes | None:
+    """Put a spool in place of the writer's in-memory list (mcap 1.x keeps it in ``__chunk_indices``)."""
+    name = "_Writer__chunk_indices"
+    if not isinstance(getattr(writer, name, None), list):
+        return None  # another mcap version: the indexes stay in memory, the log is the same
+    spool = _SpooledChunkIndexes(directory)
+    setattr(writer, name, spool)
+    return spool
 
 
 # -- reading -----------------------------------------------------------------------------
