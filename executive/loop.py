@@ -629,7 +629,7 @@ class Executive:
             self._heartbeat(wall)
         now_s = self.clock.now_s(wall)
         hb = self.vehicle.heartbeat_s
-        if hb is not None and now_s - hb > self.config.helm.link_loss_timeout_s:
+        if hb is not None and now_s - hb > self.config.helm.link_loss_timeout_s and not self._input_waiting():
             self._tick(now_s, link_ok=False)
         for mav, msg in self.uploads.tick(wall):  # mission protocol retries
             self._send_on(mav, now_s, msg)
@@ -643,6 +643,15 @@ class Executive:
             self._stop_reason = "vehicle time limit"
         elif cfg.max_wall_s is not None and wall - wall0 >= cfg.max_wall_s:
             self._stop_reason = "wall time limit"
+
+    def _input_waiting(self) -> bool:
+        """Datagrams from the autopilot wait unread: the loop is behind, the link is not silent.
+
+        At a simulator speedup a short stall of this process (a busy machine) spans many
+        vehicle seconds; the heartbeat that would have ended the silence may be in the socket.
+        """
+        ready, _, _ = select.select([self.conn.fd], [], [], 0)
+        return bool(ready)
 
     def _replanning(self, now_s: float, wall: float) -> None:
         if self.watcher is not None and wall >= self._next_watch_wall:
