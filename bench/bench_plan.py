@@ -116,8 +116,8 @@ def main() -> None:
         nx, ny = SIZES[size]
         for crit in ("robust", "optimistic"):
             r = child(["--case", str(nx), str(ny), crit, "--repeat", str(args.repeat)])
-            print(f"| {r['states']:,} | {nx} x {ny} x 4 x 8 | {crit} | {r['best_s']:.3f} | {r['median_s']:.3f} | "
-                  f"{r['first_s']:.3f} | {r['peak_rss_mb']:.0f} | {r['rss_before_mb']:.0f} | {r['reachable']:.1%} |", flush=True)
+            print(f"| {r['states']:,} | {nx} x {ny} x 4 x 8 | {crit} | {r['best_s']:.4f} | {r['median_s']:.4f} | "
+                  f"{r['first_s']:.4f} | {r['peak_rss_mb']:.0f} | {r['rss_before_mb']:.0f} | {r['reachable']:.1%} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -2,7 +2,10 @@
 
 Spec sections 3 to 5. The arrays built here are what the solver walks; the
 per-state outcome rule lives in one numba function, ``outcomes_of``, used by the
-solver, the pictures and the tests alike.
+policy paths, the pictures and the tests alike. The solver's forward pass
+(``solve._preds_heading``) writes the same rule out inline, for speed: numba
+counts references of the arrays passed on every call. The tests compare the
+solver with an independent reference implementation.
 """
 
 from __future__ import annotations
