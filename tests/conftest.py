@@ -31,3 +31,23 @@ def demo_plan(synthetic_forecast):
 @pytest.fixture()
 def rng() -> np.random.Generator:
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def dive_log(demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
+    """A short real dive's MCAP log, shared read-only by the replay, report, export and re-stream tests.
+
+    ``lrauv sim`` and ``lrauv exec`` as processes over UDP on 127.0.0.1 (``make demo``'s path), from two
+    cells west of the demo goal to the goal at 1000x: a few seconds of wall time.
+    """
+    from tests.helpers import DEMO_MISSION, start_west_of_goal
+    from vehicle_sim.demo import run_closed_loop
+
+    out = tmp_path_factory.mktemp("dive")
+    table = out / "demo.lrpt"
+    demo_plan.table.save(table)
+    lon, lat = start_west_of_goal(demo_plan.table, cells=2)
+    result = run_closed_loop(table=table, mission=DEMO_MISSION, truth=synthetic_forecast, start=f"{lon},{lat}",
+                             depth_m=0.0, heading_deg=90.0, speedup=1000.0, out=out, timeout_s=90.0)
+    assert result.exec_status == 0, result.exec_output
+    return result.log_path

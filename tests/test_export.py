@@ -1,8 +1,8 @@
 """CSV, GeoJSON and GPX of a dive, read back with the standard parsers and compared with its ``Track``.
 
 The dive is a real one: ``lrauv sim`` and ``lrauv exec`` as processes over UDP
-on 127.0.0.1, from two cells west of the goal to the goal (``closed_loop_log``,
-made once per session and shared with test_restream.py). The same log without
+on 127.0.0.1, from two cells west of the goal to the goal (``dive_log`` in
+conftest.py, made once per session). The same log without
 its SYSTEM_TIME messages is the dive whose UTC is unknown. Edge cases use small
 logs written by the real ``Recorder``.
 """
@@ -24,30 +24,9 @@ from executive.divelog import LogMessage, open_dive
 from executive.export import CSV_COLUMNS, GPX_NAMESPACE, write_csv, write_geojson, write_gpx
 from executive.recorder import LogError, Recorder, Topic
 from planner.headings import EARTH_RADIUS_M
-from tests.helpers import start_west_of_goal
 
 REPO = Path(__file__).resolve().parents[1]
 GPX = f"{{{GPX_NAMESPACE}}}"
-
-_SESSION_LOGS: dict[str, Path] = {}
-
-
-def closed_loop_log(tmp_path_factory, plan, forecast) -> Path:  # type: ignore[no-untyped-def]
-    """A short real dive's log: sim and exec as processes over UDP to the goal; run once per session."""
-    if "real" not in _SESSION_LOGS:
-        from vehicle_sim.demo import run_closed_loop
-
-        out = tmp_path_factory.mktemp("dive")
-        table = out / "demo.lrpt"
-        plan.table.save(table)
-        lon, lat = start_west_of_goal(plan.table, cells=2)
-        result = run_closed_loop(table=table, mission=REPO / "missions" / "demo.yaml", truth=forecast,
-                                 start=f"{lon},{lat}", depth_m=0.0, heading_deg=90.0, speedup=1000.0, out=out,
-                                 timeout_s=90.0)
-        assert result.exec_status == 0, result.exec_output
-        _SESSION_LOGS["real"] = result.log_path
-    return _SESSION_LOGS["real"]
-
 
 def copy_log(src: Path, dst: Path, keep: Callable[[LogMessage], bool]) -> Path:
     """``src`` rewritten by the real Recorder with only the messages ``keep`` accepts (same times, metadata)."""
@@ -60,8 +39,8 @@ def copy_log(src: Path, dst: Path, keep: Callable[[LogMessage], bool]) -> Path:
 
 
 @pytest.fixture(scope="module")
-def real_dive(tmp_path_factory, demo_plan, synthetic_forecast) -> Dive:
-    return load_dive(open_dive(closed_loop_log(tmp_path_factory, demo_plan, synthetic_forecast)))
+def real_dive(dive_log) -> Dive:
+    return load_dive(open_dive(dive_log))
 
 
 @pytest.fixture(scope="module")

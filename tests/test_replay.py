@@ -1,8 +1,8 @@
 """``lrauv replay``: the dive summary, the decision audit and bad or damaged logs (issue 4).
 
-The log is a real one: ``lrauv sim`` and ``lrauv exec`` as processes over UDP
-to the goal (``vehicle_sim.demo.run_closed_loop``). Damaged and tampered copies
-are written record by record with the ``mcap`` library.
+The log is a real one, shared with the other replay tests (``dive_log`` in
+conftest.py): ``lrauv sim`` and ``lrauv exec`` as processes over UDP to the goal.
+Damaged and tampered copies are written record by record with the ``mcap`` library.
 """
 
 from __future__ import annotations
@@ -25,26 +25,7 @@ from executive.recorder import LogError, RecordStream, Recorder, Topic, read_mes
 from executive.summary import distance_to_polyline_m, summarise
 from planner.cli import main as lrauv
 
-from tests.helpers import REPO, start_west_of_goal
-
-SPEEDUP = 1000.0
-
-
-@pytest.fixture(scope="module")
-def dive_log(demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
-    """A real dive to the goal: sim and exec processes over UDP, logged to MCAP."""
-    from vehicle_sim.demo import run_closed_loop
-
-    out = tmp_path_factory.mktemp("dive")
-    table = out / "demo.lrpt"
-    demo_plan.table.save(table)
-    lon, lat = start_west_of_goal(demo_plan.table, cells=2)
-    result = run_closed_loop(table=table, mission=REPO / "missions" / "demo.yaml", truth=synthetic_forecast,
-                             start=f"{lon},{lat}", depth_m=0.0, heading_deg=90.0, speedup=SPEEDUP, out=out,
-                             timeout_s=90.0)
-    assert result.exec_status == 0, result.exec_output
-    return result.log_path
-
+from tests.helpers import start_west_of_goal
 
 def _rewrite(src: Path, dst: Path, transform: Callable[[str, Message], bytes | None] = lambda t, m: m.data, *,
              extra_channel: str | None = None, attachments: Callable[[Attachment], bytes] | None = None) -> Path:

@@ -1,8 +1,8 @@
 """The post-dive report (``planner.report``) on a real closed-loop log, and its track segmentation by hand.
 
-The log comes from the executive (in this process) flying ``lrauv sim`` (a child
-process) over UDP on 127.0.0.1 at high speed-up, from two cells west of the
-demo goal: a few seconds of wall time, usually to the goal.
+The log is the shared real closed-loop run (``dive_log`` in conftest.py): ``lrauv
+sim`` and ``lrauv exec`` over UDP on 127.0.0.1 at 1000x, from two cells west of
+the demo goal to the goal.
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ from __future__ import annotations
 import html
 import re
 import struct
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -19,33 +18,11 @@ import pytest
 from executive.audit import logged_tables
 from executive.dive import Track, load_dive
 from executive.divelog import open_dive
-from executive.helm import HelmConfig
-from executive.loop import ExecConfig, Executive
 from planner.report import ActionRun, action_runs, track_segments, write_report
 
-from tests.helpers import start_west_of_goal
-from tests.test_closed_loop import Sim
 
-SPEEDUP = "2000"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 SUMMARY = "goal       reached <after> 0.4 h & 1.2 Wh\n\"quoted\" 'text'"
-
-
-@pytest.fixture(scope="module")
-def dive_log(demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
-    """A short real log: the demo table flown from 2 cells west of the goal at 2000 times real time."""
-    log = tmp_path_factory.mktemp("report-log") / "short.mcap"
-    lon, lat = start_west_of_goal(demo_plan.table, cells=2)
-    sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--speedup", SPEEDUP)
-    stop = threading.Event()
-    try:
-        config = ExecConfig(link=f"udpout:127.0.0.1:{sim.port}", log_path=log, exit_on_arrival=True, linger_s=5.0,
-                            max_wall_s=20.0, helm=HelmConfig())
-        Executive(config, demo_plan.table).run(stop)
-    finally:
-        stop.set()
-        sim.stop()
-    return log
 
 
 @pytest.fixture(scope="module")

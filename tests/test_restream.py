@@ -1,6 +1,6 @@
 """Re-streaming a dive to a listener on a real UDP socket on 127.0.0.1, parsed with pymavlink's MAVLink 2 parser.
 
-The dive is the real closed-loop log of test_export.py (``closed_loop_log``);
+The dive is the shared real closed-loop log (``dive_log`` in conftest.py);
 edge cases use small logs written by the real ``Recorder``. No assertion is
 about wall time: pacing is checked through the vehicle time the stream covers.
 """
@@ -24,7 +24,6 @@ from executive import mavlink_bridge as bridge
 from executive.divelog import DiveLog, LogMessage, open_dive
 from executive.recorder import LogError, Recorder, Topic
 from executive.restream import rebuild, restream
-from tests.test_export import closed_loop_log
 
 FAST = 1e4  # vehicle seconds per wall second: the short dive in well under a second
 IN_FLIGHT = 32  # datagrams the sender may be ahead of the listener (far below the socket's buffer)
@@ -87,8 +86,8 @@ def listener():
 
 
 @pytest.fixture(scope="module")
-def real_log(tmp_path_factory, demo_plan, synthetic_forecast) -> DiveLog:
-    return open_dive(closed_loop_log(tmp_path_factory, demo_plan, synthetic_forecast))
+def real_log(dive_log) -> DiveLog:
+    return open_dive(dive_log)
 
 
 def _stream(log: DiveLog, listener: Listener, **options):  # type: ignore[no-untyped-def]
