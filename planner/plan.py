@@ -17,10 +17,12 @@ from planner.forecast import Forecast, nearest_time_index, open_forecast
 from planner.resample import resample
 from planner.grid import BBox, Grid
 from planner.settings import Goal, PlanSettings
-from planner.solve import Solution, solve
+from planner.solve import Solution, goal_cells_on, solve
 from planner.atomic import write_atomic
 from planner.table import PolicyTable
 from planner.transitions import TransitionModel, build_transitions
+from planner.physical import PhysicalModel, build_physical, fine_grid, refine_factor
+from planner.physical_solve import PhysicalSolution, solve_physical
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,8 +51,8 @@ class PlanResult:
     grid: Grid
     u_m_s: NDArray[np.float64]
     v_m_s: NDArray[np.float64]
-    model: TransitionModel
-    solution: Solution
+    model: TransitionModel | PhysicalModel
+    solution: Solution | PhysicalSolution
     table: PolicyTable
     timings_s: dict[str, float]
 
@@ -70,6 +72,14 @@ def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
     return Grid.from_bbox(
         bbox, nx=request.nx or lon.size, ny=request.ny or lat.size, depths_m=list(request.depths_m)
     )
+
+
+def native_spacing_deg(forecast: Forecast) -> float | None:
+    """The forecast's own lon/lat spacing (the finer), or None for a curvilinear grid."""
+    lon, lat = forecast.lon_deg, forecast.lat_deg
+    if lon.ndim != 1 or lon.size < 2 or lat.size < 2:
+        return None
+    return float(min(np.abs(np.diff(lon)).min(), np.abs(np.diff(lat)).min()))
 
 
 def check_coverage(forecast: Forecast, grid: Grid) -> None:
@@ -119,14 +129,34 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     grid = planning_grid(forecast, request)
     check_coverage(forecast, grid)
     index = choose_time_index(forecast, request)
-    t = time.perf_counter()
-    u, v = resample(forecast, grid, time_index=index)
-    timings["resample_s"] = time.perf_counter() - t
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states")
-    t = time.perf_counter()
-    model = build_transitions(u, v, grid, request.settings)
-    solution = solve(model, request.goal, progress=progress)
-    timings["plan_s"] = time.perf_counter() - t
+    model: TransitionModel | PhysicalModel
+    solution: Solution | PhysicalSolution
+    if request.settings.model == "physical":
+        t = time.perf_counter()
+        refine = refine_factor(grid, native_spacing_deg(forecast))
+        uf, vf = resample(forecast, fine_grid(grid, refine), time_index=index)
+        u, v = uf[:, ::refine, ::refine], vf[:, ::refine, ::refine]
+        timings["resample_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        water = np.isfinite(u) & np.isfinite(v)
+        if not water.any():
+            raise GridError(f"{forecast.source}: no water on the planning grid")
+        goal_mask = goal_cells_on(grid, water, request.goal).mask
+        model = build_physical(uf, vf, grid, request.settings, refine=refine, goal_mask=goal_mask)
+        timings["transitions_s"] = time.perf_counter() - t
+        _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each, "
+                        f"currents {refine}x finer than the grid")
+        solution = solve_physical(model, request.goal)
+        timings["plan_s"] = time.perf_counter() - t
+    else:
+        t = time.perf_counter()
+        u, v = resample(forecast, grid, time_index=index)
+        timings["resample_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        model = build_transitions(u, v, grid, request.settings)
+        solution = solve(model, request.goal, progress=progress)
+        timings["plan_s"] = time.perf_counter() - t
     table = PolicyTable.from_solution(
         solution,
         forecast_source=forecast.source,
@@ -143,8 +173,7 @@ def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     """Write the arrays of spec section 8 to an ``.npz``, atomically."""
     sol = result.solution
     buf = io.BytesIO()
-    np.savez_compressed(
-        buf,
+    arrays = dict(
         cost=np.ascontiguousarray(sol.cost),
         steps=np.ascontiguousarray(sol.steps).astype(np.int64),
         action=np.ascontiguousarray(sol.action).astype(np.uint8),
@@ -153,6 +182,9 @@ def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:
         depth=result.grid.depth_m,
         flow_dir=np.asarray(result.model.flow_dir, dtype=np.int8),
     )
+    if isinstance(sol, PhysicalSolution):  # cost in Wh and the time to go, s (docs/physical-model.md)
+        arrays["time_s"] = np.ascontiguousarray(sol.time_s)
+    np.savez_compressed(buf, **arrays)
     return write_atomic(path, buf.getvalue())
 
 

@@ -8,10 +8,13 @@ from typing import Literal, get_args
 
 from planner.actions import Action
 from planner.errors import GoalError, PlannerError
+from vehicle_sim.dynamics import VehicleParams
 
-Criterion = Literal["robust", "optimistic"]
+Criterion = Literal["robust", "optimistic", "expected"]
 Uncertainty = Literal["lateral", "none"]
-Model = Literal["paper"]
+Model = Literal["paper", "physical"]
+# Which criteria each model has (docs/physical-model.md): the paper's graph has no probabilities.
+CRITERIA: dict[str, tuple[str, ...]] = {"paper": ("robust", "optimistic"), "physical": ("robust", "expected")}
 OnArrival = Literal["hold", "surface", "drift", "next"]  # at a goal (docs/missions.md); the executive's too
 BreachAction = Literal["surface", "drift", "hold"]  # when a safety limit is breached (docs/missions.md)
 
@@ -86,6 +89,47 @@ class Goal:
 
 
 @dataclass(frozen=True, kw_only=True)
+class PhysicalSettings:
+    """How the physical model samples a transition (docs/physical-model.md).
+
+    Outcomes come from ``start_points`` x ``start_points`` start points spread over the cell
+    times the forecast itself plus ``error_members`` perturbed currents: uniform offsets of
+    equal size in evenly spaced directions, sized so that each current component's
+    standard deviation over the members is ``current_error_m_s``.
+    """
+
+    start_points: int = 3
+    current_error_m_s: float = 0.03
+    error_members: int = 8
+    max_transition_s: float | None = None  # None: 4 cell crossings at cruise speed (docs/physical-model.md)
+    rk4_steps: int = 8  # RK4 steps per cell crossing (per glide)
+    min_cost_wh: float = 1e-6  # cost floor: no zero-cost cycles in the expected criterion
+    tolerance_wh: float = 1e-9  # policy iteration switches an action only when better by more (< the floor)
+    max_iterations: int = 500  # policy iteration's guard
+
+    def __post_init__(self) -> None:
+        for name in ("start_points", "error_members", "rk4_steps", "max_iterations"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < (0 if name == "error_members" else 1):
+                raise PlannerError(f"physical.{name}: expected a whole number >= {0 if name == 'error_members' else 1}; got {value!r}")
+        if self.start_points > 9:
+            raise PlannerError(f"physical.start_points: expected at most 9 per axis; got {self.start_points}")
+        if self.error_members in (1, 2) or self.error_members > 64:
+            raise PlannerError("physical.error_members: expected 0 (no forecast error) or 3..64 evenly spaced "
+                               f"directions; got {self.error_members}")
+        for name in ("current_error_m_s", "min_cost_wh", "tolerance_wh"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise PlannerError(f"physical.{name}: expected a number >= 0; got {value!r}")
+        if self.max_transition_s is not None and not (
+                isinstance(self.max_transition_s, int | float) and math.isfinite(self.max_transition_s)
+                and self.max_transition_s > 0):
+            raise PlannerError(f"physical.max_transition_s: expected a number of seconds > 0; got {self.max_transition_s!r}")
+        if self.min_cost_wh <= 0:
+            raise PlannerError(f"physical.min_cost_wh: expected a number > 0; got {self.min_cost_wh!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
 class PlanSettings:
     """How to plan: model, criterion, uncertainty, costs and the calm threshold."""
 
@@ -94,10 +138,16 @@ class PlanSettings:
     uncertainty: Uncertainty = "lateral"
     costs: Costs = field(default_factory=Costs)
     calm_speed_m_s: float = DEFAULT_CALM_SPEED_M_S
+    # The physical model's sampling and the vehicle it plans for (unused by the paper model).
+    physical: PhysicalSettings = field(default_factory=PhysicalSettings)
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
 
     def __post_init__(self) -> None:
         check_choice("model", self.model, Model)
         check_choice("criterion", self.criterion, Criterion)
+        if self.criterion not in CRITERIA[self.model]:
+            raise PlannerError(f"criterion: the {self.model} model has {' and '.join(CRITERIA[self.model])}; "
+                               f"got {self.criterion!r}")
         check_choice("uncertainty", self.uncertainty, Uncertainty)
         if not (math.isfinite(self.calm_speed_m_s) and self.calm_speed_m_s >= 0):
             raise PlannerError(f"calm_speed: expected a non-negative speed in m/s; got {self.calm_speed_m_s!r}")

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from planner.actions import Action
 from planner.errors import GoalError, GridError
+from planner.grid import Grid
 from planner.headings import DI, DJ, N_HEADINGS
 from planner.settings import Goal
 from planner.table import MAX_STATES
@@ -127,7 +128,11 @@ def nominal_path(solution: Solution, start: tuple[int, int, int, int], *, max_st
 
 def locate_goal(model: TransitionModel, goal: Goal) -> GoalCells:
     """Goal cell, layer and goal-cell mask, or a GoalError that says why not (spec section 6)."""
-    grid = model.grid
+    return goal_cells_on(model.grid, model.water, goal)
+
+
+def goal_cells_on(grid: Grid, water: NDArray[np.bool_], goal: Goal) -> GoalCells:
+    """``locate_goal`` for a grid and its water mask ``(L, ny, nx)``."""
     i, j, outside = grid.nearest_cell(goal.lon_deg, goal.lat_deg)
     where = f"goal ({goal.lon_deg:.5f}, {goal.lat_deg:.5f}, {goal.depth_m:g} m)"
     if outside > 0.5:
@@ -145,7 +150,6 @@ def locate_goal(model: TransitionModel, goal: Goal) -> GoalCells:
             f"{', '.join(f'{d:g}' for d in grid.depth_m)} m"
         )
     l = grid.nearest_layer(goal.depth_m)
-    water = model.water
     if not water[l, j, i]:
         wl = np.argwhere(water[l])
         hint = ""

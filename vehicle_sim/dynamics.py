@@ -19,7 +19,7 @@ import math
 import random
 from dataclasses import dataclass
 from enum import Enum, unique
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 EARTH_RADIUS_M = 6_371_000.0  # spec section 1
 M_PER_DEG_LAT = EARTH_RADIUS_M * math.pi / 180.0
@@ -210,12 +210,7 @@ def step(body: Body, sp: Setpoint, current: tuple[float, float], params: Vehicle
     new_lat = lat + gn * dt_s / M_PER_DEG_LAT
     new_lon = body.lon_deg + ge * dt_s / (M_PER_DEG_LAT * cos_lat)
 
-    # Energy: hotel + propulsion (cubic in speed through water) + buoyancy engine while gliding.
-    ratio = math.hypot(wn, we) / params.cruise_speed_m_s
-    power_w = params.hotel_w + params.propulsion_w * ratio * ratio * ratio
-    if vz != 0.0:
-        power_w += params.buoyancy_w
-    energy = body.energy_used_wh + power_w * dt_s / 3600.0
+    energy = body.energy_used_wh + power_draw_w(params, math.hypot(wn, we), vz != 0.0) * dt_s / 3600.0
 
     return Body(body.time_s + dt_s, new_lat, new_lon, new_depth, new_heading, wn, we, vz, gn, ge, yaw_rate, energy)
 
@@ -229,10 +224,19 @@ def _cap(n: float, e: float, limit: float) -> tuple[float, float]:
     return n, e
 
 
+def power_draw_w(params: VehicleParams, water_speed_m_s: Any, gliding: Any) -> Any:
+    """Electrical power, W: hotel + propulsion (cubic in speed through water) + buoyancy engine while gliding.
+
+    The one energy law of the project: the simulator integrates it every step and the physical
+    planning model (``planner.physical``) charges it per transition. Floats or numpy arrays.
+    """
+    ratio = water_speed_m_s / params.cruise_speed_m_s
+    return params.hotel_w + params.propulsion_w * ratio * ratio * ratio + params.buoyancy_w * gliding
+
+
 def power_w(body: Body, params: VehicleParams) -> float:
     """Electrical power drawn in the state ``body`` (for current telemetry)."""
-    ratio = body.water_speed_m_s / params.cruise_speed_m_s
-    return params.hotel_w + params.propulsion_w * ratio**3 + (params.buoyancy_w if body.down_m_s != 0.0 else 0.0)
+    return float(power_draw_w(params, body.water_speed_m_s, body.down_m_s != 0.0))
 
 
 def battery_remaining(body: Body, params: VehicleParams) -> float:
