@@ -8,9 +8,11 @@ never loads the planner's heavy dependencies.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from planner.arguments import CommandParser, floats
@@ -49,7 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--time", help="forecast time (ISO 8601); the nearest step is used")
     plan.add_argument("--goal", type=lambda t: floats(t, 3, "goal"), help="LON,LAT,DEPTH of the goal")
     plan.add_argument("--goal-radius", type=int, help="goal radius in cells (default 1)")
-    plan.add_argument("--criterion", choices=["robust", "optimistic"])
+    plan.add_argument("--model", choices=["paper", "physical"],
+                      help="planning model: the paper's graph (default) or the physical one (docs/physical-model.md)")
+    plan.add_argument("--criterion", choices=["robust", "optimistic", "expected"],
+                      help="paper: robust (default) or optimistic; physical: robust (default) or expected")
     plan.add_argument("--uncertainty", choices=["lateral", "none"])
     plan.add_argument("--costs", type=_costs, help="e.g. drift=0,forward=4,rotate=10,glide=2")
     plan.add_argument("--calm-speed", type=float, help="calm threshold in m/s (default 0.01)")
@@ -73,6 +78,24 @@ def build_parser() -> argparse.ArgumentParser:
     synth.add_argument("--seed", type=int, default=0)
     synth.add_argument("--hours", type=int, default=72)
     synth.add_argument("--issue", type=int, help="forecast issue number (error shrinks with each issue); default: the truth")
+
+    # Options of planner.double_gyre.DoubleGyreSettings, here so that building the parser imports no xarray.
+    gyre = fsub.add_parser("gyre", help="write the analytic double gyre (Shadden et al. 2005) as a forecast")
+    gyre.add_argument("out", type=Path)
+    gyre.add_argument("--peak-speed-m-s", type=float, help="peak speed of the steady gyre, m/s (default 0.5)")
+    gyre.add_argument("--eps", type=float, help="oscillation amplitude of the dividing line, 0..0.5 (default 0.1; 0 = steady)")
+    gyre.add_argument("--period-h", type=float, help="oscillation period in hours (default 12)")
+    gyre.add_argument("--phase-rad", type=float, help="oscillation phase at the issue time, radians (default 0)")
+    gyre.add_argument("--hours", type=float, help="forecast length in hours (default 48)")
+    gyre.add_argument("--step-h", type=float, help="time step in hours (default 1)")
+    gyre.add_argument("--spacing-deg", type=float, help="grid spacing in degrees (default 0.005)")
+    gyre.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.467)")
+    gyre.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
+    gyre.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+
+    from planner.evaluate_cli import add_parser as add_evaluate
+
+    add_evaluate(sub)
 
     # The vehicle side registers its own subcommands; their modules import nothing heavy.
     from executive.cli import add_parsers as add_executive
@@ -120,6 +143,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from planner.waypoints_cli import run as run_waypoints
 
             return run_waypoints(args)
+        if args.command == "evaluate":
+            from planner.evaluate_cli import run as run_evaluate
+
+            return run_evaluate(args)
         if args.command == "replay":
             from planner.replay_cli import run as run_replay
 
@@ -146,6 +173,11 @@ def _forecast(args: argparse.Namespace) -> int:
             raise PlannerError(f"--variables: expected two names U,V; got {args.variables}")
         print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))  # type: ignore[arg-type]
         return 0
+    if args.forecast_command == "gyre":
+        from planner.double_gyre import settings_from_args, write_gyre
+
+        print(f"wrote {write_gyre(args.out, settings_from_args(args))}")
+        return 0
     from planner.synthetic import SyntheticSettings, write_synthetic
 
     path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
@@ -156,7 +188,7 @@ def _forecast(args: argparse.Namespace) -> int:
 def _plan(args: argparse.Namespace) -> int:
     from planner.grid import BBox
     from planner.plan import PlanRequest, export_values, make_plan
-    from planner.settings import Costs, Goal, PlanSettings
+    from planner.settings import CRITERIA, Costs, Goal, PlanSettings
 
     progress = not args.quiet
     mission = None
@@ -199,16 +231,22 @@ def _plan(args: argparse.Namespace) -> int:
             goal = Goal(lon_deg=goal.lon_deg, lat_deg=goal.lat_deg, depth_m=goal.depth_m, radius_cells=args.goal_radius)
     else:
         raise PlannerError("plan: no goal: give --goal LON,LAT,DEPTH or a mission file")
-    # Settings.
+    # Settings: the mission's (its vehicle figures and physical sampling included), flags override.
     base = mission.settings if mission is not None else PlanSettings()
     costs = base.costs
     if args.costs:
         fields = {"drift": costs.drift, "forward": costs.forward, "rotate": costs.rotate, "glide": costs.glide}
         fields.update(args.costs)
         costs = Costs(**fields)
-    settings = PlanSettings(
-        model=base.model,
-        criterion=args.criterion or base.criterion,
+    model = args.model or base.model
+    criterion = args.criterion or base.criterion
+    if criterion not in CRITERIA[model]:
+        source = "" if args.criterion else f" (from {mission.path if mission is not None else 'the default'}; give --criterion)"
+        raise PlannerError(f"--criterion: the {model} model has {' and '.join(CRITERIA[model])}; got {criterion!r}{source}")
+    settings = replace(
+        base,
+        model=model,
+        criterion=criterion,
         uncertainty=args.uncertainty or base.uncertainty,
         costs=costs,
         calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
@@ -220,8 +258,10 @@ def _plan(args: argparse.Namespace) -> int:
     )
     out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
     t0 = time.perf_counter()
+    physical = settings.model == "physical"
     if progress:
-        print(f"planning on {forecast_path} ({settings.criterion}, {settings.uncertainty})", file=sys.stderr)
+        how = f"physical, {settings.criterion}" if physical else f"{settings.criterion}, {settings.uncertainty}"
+        print(f"planning on {forecast_path} ({how})", file=sys.stderr)
     result = make_plan(request, progress=progress)
     data = result.table.to_bytes(compress=not args.no_compress)
     from planner.atomic import write_atomic
@@ -236,16 +276,23 @@ def _plan(args: argparse.Namespace) -> int:
           f" ({result.table.forecast_time or 'no reference date'})")
     print(f"grid       {result.grid.nx} x {result.grid.ny} cells x {result.grid.n_layers} layers"
           f" ({', '.join(f'{d:g}' for d in result.grid.depth_m)} m) x 8 headings")
+    for line in _model_lines(result):
+        print(line)
     print(f"reachable  {reachable:,} of {water_states:,} water states ({reachable / max(water_states, 1):.1%})")
+    start = None if args.start is None else _start_state(result, args.start)
+    if start is not None:
+        print(_start_line(result, args.start, start))
     t = result.timings_s
-    print(f"time       load {t['load_s']:.2f} s, resample {t['resample_s']:.2f} s, plan {t['plan_s']:.3f} s,"
-          f" total {time.perf_counter() - t0:.2f} s")
+    stages = f"load {t['load_s']:.2f} s, resample {t['resample_s']:.2f} s, plan {t['plan_s']:.3f} s"
+    if "transitions_s" in t:  # the physical model's plan time: sampling the transitions, then solving
+        stages += f" (transitions {t['transitions_s']:.2f} s, solve {t['plan_s'] - t['transitions_s']:.3f} s)"
+    print(f"time       {stages}, total {time.perf_counter() - t0:.2f} s")
     if args.export_values:
         print(f"values     {export_values(result, args.export_values)}")
     if args.plot:
         from planner.plot import default_start, plot_all
 
-        start = default_start(sol) if args.start is None else _start_state(result, args.start)
+        start = default_start(sol) if start is None else start
         layer = args.plot_layer
         if layer is not None and not 0 <= layer < result.grid.n_layers:
             raise PlannerError(f"--plot-layer: expected 0..{result.grid.n_layers - 1}; got {layer}")
@@ -255,6 +302,38 @@ def _plan(args: argparse.Namespace) -> int:
         for p in paths:
             print(f"picture    {p}")
     return 0
+
+
+def _model_lines(result) -> list[str]:  # type: ignore[no-untyped-def]
+    """What was planned, for the summary: the paper model's settings, or the physical model's figures."""
+    s = result.model.settings
+    if s.model != "physical":
+        c = s.costs
+        return [f"model      paper, {s.criterion}, {s.uncertainty} uncertainty; costs drift {c.drift}, forward"
+                f" {c.forward}, rotate {c.rotate}, glide {c.glide}"]
+    m, sol, v = result.model, result.solution, s.vehicle
+    lines = [f"model      physical, {s.criterion}; costs in Wh (hotel {v.hotel_w:g} W, propulsion {v.propulsion_w:g} W"
+             f" at {v.cruise_speed_m_s:g} m/s, buoyancy {v.buoyancy_w:g} W)",
+             f"samples    {m.n_pairs:,} state-actions, {m.samples_per_action} samples per action"
+             f" ({s.physical.start_points}x{s.physical.start_points} start points x {s.physical.error_members + 1}"
+             f" currents), currents {m.refine}x finer than the grid"]
+    if s.criterion == "expected":
+        lines.append(f"solve      policy iteration: {sol.iterations} iterations, residual {sol.residual_wh:.2g} Wh")
+    return lines
+
+
+def _start_line(result, given: list[float], start: tuple[int, int, int, int]) -> str:  # type: ignore[no-untyped-def]
+    """The predicted cost (and, for the physical model, time) to go from ``--start``."""
+    lon, lat, depth, heading = given
+    where = f"start      ({lon:g}, {lat:g}, {depth:g} m, {heading:g} deg), state (l, j, i, k) = {start}:"
+    sol = result.solution
+    cost, steps = sol.value(*start)
+    if not math.isfinite(cost):
+        return f"{where} cannot reach the goal"
+    if result.model.settings.model == "physical":
+        hours = float(sol.time_s[start]) / 3600.0
+        return f"{where} {cost:.1f} Wh, {hours:.2f} h to go ({result.model.settings.criterion})"
+    return f"{where} cost {cost:g}, {steps} steps ({result.model.settings.criterion})"
 
 
 def _start_state(result, start: list[float]) -> tuple[int, int, int, int]:  # type: ignore[no-untyped-def]

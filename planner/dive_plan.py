@@ -20,12 +20,14 @@ from numpy.typing import NDArray
 from planner.errors import PlannerError
 from planner.forecast import file_identity
 from planner.grid import BBox
+from planner.physical_solve import PhysicalSolution
 from planner.plan import PlanRequest, PlanResult, make_plan
-from planner.settings import Costs, Goal, PlanSettings
+from planner.settings import Costs, Goal, PhysicalSettings, PlanSettings
 from planner.solve import nominal_path
 from planner.table import PolicyTable
+from vehicle_sim.dynamics import VehicleParams
 
-__all__ = ["NominalPath", "find_forecast", "nominal_from", "plan_again"]
+__all__ = ["NominalPath", "find_forecast", "nominal_from", "plan_again", "table_settings"]
 
 
 def find_forecast(table: PolicyTable, *, given: Path | None = None, near: tuple[Path, ...] = ()) -> Path:
@@ -49,19 +51,45 @@ def find_forecast(table: PolicyTable, *, given: Path | None = None, near: tuple[
                        + "; ".join(looked) + "; give it with --forecast")
 
 
+def table_settings(table: PolicyTable) -> PlanSettings:
+    """The ``PlanSettings`` a table's header records (docs/policy-table.md); PlannerError when they are not valid.
+
+    Paper tables carry their costs; physical tables their vehicle figures and sampling (``physical``;
+    a physical table without it, from before the key existed, gets the defaults, and ``plan_again``'s
+    action check then tells whether they were the ones used).
+    """
+    name = f"table {table.crc32:08x}"
+    costs = Costs()
+    if table.model != "physical" or table.costs:
+        c = table.costs
+        missing = [k for k in ("drift", "forward", "rotate", "glide") if k not in c]
+        if missing:
+            raise PlannerError(f"{name}: header costs lack {', '.join(missing)}")
+        costs = Costs(drift=c["drift"], forward=c["forward"], rotate=c["rotate"], glide=c["glide"])
+    physical, vehicle = PhysicalSettings(), VehicleParams()
+    if table.physical is not None:
+        try:
+            physical = PhysicalSettings(**table.physical.get("sampling", {}))  # type: ignore[arg-type]
+            vehicle = VehicleParams(**table.physical.get("vehicle", {}))  # type: ignore[arg-type]
+        except TypeError as exc:  # a key this version does not know
+            raise PlannerError(f"{name}: header physical: {exc}; planned by a newer planner?") from None
+        except ValueError as exc:
+            raise PlannerError(f"{name}: header physical: {exc}") from None
+    return PlanSettings(model=table.model, criterion=table.criterion,  # type: ignore[arg-type]
+                        uncertainty=table.uncertainty,  # type: ignore[arg-type]
+                        costs=costs, physical=physical, vehicle=vehicle)
+
+
 def plan_again(table: PolicyTable, forecast: str | os.PathLike[str]) -> PlanResult:
     """Plan ``table``'s goal on ``forecast`` with the header's settings; refuse if any action differs."""
     grid_east = table.lon0_deg + (table.nx - 1) * table.dlon_deg
     grid_north = table.lat0_deg + (table.ny - 1) * table.dlat_deg
-    c = table.costs
     request = PlanRequest(
         forecast_path=Path(forecast),
         goal=Goal(lon_deg=table.goal_lon_deg, lat_deg=table.goal_lat_deg, depth_m=table.goal_depth_m,
                   radius_cells=table.goal_radius_cells),
         depths_m=tuple(table.depth_m),
-        settings=PlanSettings(model=table.model, criterion=table.criterion,  # type: ignore[arg-type]
-                              uncertainty=table.uncertainty,  # type: ignore[arg-type]
-                              costs=Costs(drift=c["drift"], forward=c["forward"], rotate=c["rotate"], glide=c["glide"])),
+        settings=table_settings(table),
         bbox=BBox(west_deg=table.lon0_deg, south_deg=table.lat0_deg, east_deg=grid_east, north_deg=grid_north),
         nx=table.nx, ny=table.ny, time_iso=table.forecast_time,
     )
@@ -82,15 +110,24 @@ class NominalPath:
     lat_deg: NDArray[np.float64]
     depth_m: NDArray[np.float64]
     actions: tuple[str, ...]
-    cost: float  # predicted cost-to-go at the start (inf: unreachable)
+    cost: float  # predicted cost-to-go at the start (inf: unreachable), in ``cost_unit``
+    cost_unit: str = "cost units"  # the paper model's action costs, or "Wh" for the physical model
+    time_s: float | None = None  # physical model: predicted time to go at the start, s (inf: unreachable)
 
 
 def nominal_from(result: PlanResult, start: tuple[int, int, int, int]) -> NominalPath:
-    """The nominal path of ``result``'s policy from table state ``start`` ``(l, j, i, k)``."""
+    """The nominal path of ``result``'s policy from table state ``start`` ``(l, j, i, k)``.
+
+    Paper plans: ``planner.solve.nominal_path`` (each action's nominal outcome); physical plans:
+    ``PhysicalSolution.nominal`` (each action's most likely outcome), with the cost in Wh.
+    """
     grid = result.grid
-    steps = nominal_path(result.solution, start)
+    sol = result.solution
+    physical = isinstance(sol, PhysicalSolution)
+    steps = sol.nominal(start) if physical else nominal_path(sol, start)  # type: ignore[union-attr, arg-type]
     return NominalPath(
         lon_deg=np.array([grid.lon_deg[s.i] for s in steps]), lat_deg=np.array([grid.lat_deg[s.j] for s in steps]),
         depth_m=np.array([grid.depth_m[s.l] for s in steps]), actions=tuple(s.action.name for s in steps),
-        cost=result.solution.value(*start)[0],
+        cost=sol.value(*start)[0], cost_unit="Wh" if physical else "cost units",
+        time_s=float(sol.time_s[tuple(start)]) if physical else None,  # type: ignore[union-attr]
     )

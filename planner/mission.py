@@ -17,8 +17,22 @@ import yaml
 
 from planner.errors import MissionError, PlannerError
 from planner.grid import BBox
-from planner.settings import BreachAction, Costs, Criterion, Goal, Model, OnArrival, PlanSettings, Uncertainty
+from planner.settings import (
+    CRITERIA,
+    BreachAction,
+    Costs,
+    Goal,
+    Model,
+    OnArrival,
+    PhysicalSettings,
+    PlanSettings,
+    Uncertainty,
+)
 from planner.waypoints import MAX_GOALS
+from vehicle_sim.dynamics import VehicleParams
+
+# The defaults of the vehicle figures are the simulator's (one set of numbers for the project).
+_VP = VehicleParams()
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -47,20 +61,43 @@ class Region:
 
 @dataclass(frozen=True, kw_only=True)
 class EnergyModel:
-    """Electrical power by use, watts (defaults describe a Tethys-class LRAUV; docs/missions.md)."""
+    """Electrical power by use, watts (defaults: ``vehicle_sim.dynamics.VehicleParams``, a Tethys-class LRAUV)."""
 
-    hotel_w: float = 8.0
-    propulsion_w: float = 12.0
-    buoyancy_w: float = 15.0
-    battery_wh: float = 3000.0
+    hotel_w: float = _VP.hotel_w
+    propulsion_w: float = _VP.propulsion_w  # at cruise speed, scaling with (speed / cruise)^3
+    buoyancy_w: float = _VP.buoyancy_w
+    battery_wh: float = _VP.battery_wh
+
+
+# A mission sets the cruise speed only; the through-water speed limit (the simulator's cap, and the physical
+# model's for station keeping while rotating) keeps VehicleParams' default ratio to it (1.5 m/s / 1.0 m/s),
+# and never falls below VehicleParams' default: max(1.5 m/s, 1.5 x cruise), so it is always >= cruise.
+MAX_SPEED_RATIO = _VP.max_speed_m_s / _VP.cruise_speed_m_s
 
 
 @dataclass(frozen=True, kw_only=True)
 class Vehicle:
-    cruise_speed_m_s: float = 1.0
-    yaw_rate_deg_s: float = 10.0
-    glide_rate_m_s: float = 0.2
+    """The mission's vehicle figures (docs/missions.md); ``params()`` gives the simulator's and the physical
+    model's ``VehicleParams`` from them, so one set of figures drives both."""
+
+    cruise_speed_m_s: float = _VP.cruise_speed_m_s
+    yaw_rate_deg_s: float = _VP.yaw_rate_deg_s
+    glide_rate_m_s: float = _VP.glide_rate_m_s
     energy: EnergyModel = field(default_factory=EnergyModel)
+
+    @property
+    def max_speed_m_s(self) -> float:
+        """The through-water speed limit: max(VehicleParams' default 1.5 m/s, 1.5 x cruise)."""
+        return max(_VP.max_speed_m_s, MAX_SPEED_RATIO * self.cruise_speed_m_s)
+
+    def params(self) -> VehicleParams:
+        """These figures as ``VehicleParams``; the figures a mission does not set keep VehicleParams' defaults."""
+        e = self.energy
+        return VehicleParams(
+            cruise_speed_m_s=self.cruise_speed_m_s, max_speed_m_s=self.max_speed_m_s,
+            yaw_rate_deg_s=self.yaw_rate_deg_s, glide_rate_m_s=self.glide_rate_m_s,
+            hotel_w=e.hotel_w, propulsion_w=e.propulsion_w, buoyancy_w=e.buoyancy_w, battery_wh=e.battery_wh,
+        )
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -315,11 +352,11 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
 
     vh = top.section("vehicle", {"cruise_speed_m_s", "yaw_rate_deg_s", "glide_rate_m_s", "energy"})
     en = vh.section("energy", {"hotel_w", "propulsion_w", "buoyancy_w", "battery_wh"})
-    d_en = EnergyModel()
+    d_en, d_vh = EnergyModel(), Vehicle()
     vehicle = Vehicle(
-        cruise_speed_m_s=vh.number("cruise_speed_m_s", 1.0, minimum=0.01, unit="m/s"),
-        yaw_rate_deg_s=vh.number("yaw_rate_deg_s", 10.0, minimum=0.1, unit="deg/s"),
-        glide_rate_m_s=vh.number("glide_rate_m_s", 0.2, minimum=0.01, unit="m/s"),
+        cruise_speed_m_s=vh.number("cruise_speed_m_s", d_vh.cruise_speed_m_s, minimum=0.01, unit="m/s"),
+        yaw_rate_deg_s=vh.number("yaw_rate_deg_s", d_vh.yaw_rate_deg_s, minimum=0.1, unit="deg/s"),
+        glide_rate_m_s=vh.number("glide_rate_m_s", d_vh.glide_rate_m_s, minimum=0.01, unit="m/s"),
         energy=EnergyModel(
             hotel_w=en.number("hotel_w", d_en.hotel_w, minimum=0, unit="W"),
             propulsion_w=en.number("propulsion_w", d_en.propulsion_w, minimum=0, unit="W"),
@@ -328,7 +365,14 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         ),
     )
 
-    pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s"})
+    pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical"})
+    model = pl.choice("model", Model, "paper")
+    criterion = pl.text("criterion", "robust")
+    if criterion not in CRITERIA[model]:
+        has = CRITERIA[model]
+        known = criterion in {c for cs in CRITERIA.values() for c in cs}
+        raise doc.error("planning.criterion", f"the {model} model has {' and '.join(has)}; got {criterion!r}" if known
+                        else f"expected one of {', '.join(has)} (the {model} model's); got {criterion!r}")
     cs = pl.section("costs", {"drift", "forward", "rotate", "glide"})
     d_costs = Costs()
     try:
@@ -337,11 +381,13 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         key = str(exc).split(":", 1)[0]
         raise doc.error(f"planning.{key}", str(exc).split(": ", 1)[-1]) from None
     settings = PlanSettings(
-        model=pl.choice("model", Model, "paper"),  # type: ignore[arg-type]
-        criterion=pl.choice("criterion", Criterion, "robust"),  # type: ignore[arg-type]
+        model=model,  # type: ignore[arg-type]
+        criterion=criterion,  # type: ignore[arg-type]
         uncertainty=pl.choice("uncertainty", Uncertainty, "lateral"),  # type: ignore[arg-type]
         costs=costs,
         calm_speed_m_s=pl.number("calm_speed_m_s", 0.01, minimum=0, unit="m/s"),
+        physical=_physical(doc, pl),
+        vehicle=vehicle.params(),
     )
 
     goals_raw = top.raw("goals")
@@ -398,6 +444,28 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         goals=tuple(goals), replanning=replanning, safety=safety,
         signing=_signing(doc, top, base) if top.has("signing") else None,
     )
+
+
+PHYSICAL_INTEGERS = ("start_points", "error_members", "rk4_steps", "max_iterations")
+PHYSICAL_NUMBERS = {"current_error_m_s": "m/s", "max_transition_s": "s", "min_cost_wh": "Wh", "tolerance_wh": "Wh"}
+
+
+def _physical(doc: _Doc, pl: _Section) -> PhysicalSettings:
+    """``planning.physical``: the physical model's sampling (docs/physical-model.md); the paper model ignores it.
+
+    A key that is absent or null keeps ``PhysicalSettings``' default (for ``max_transition_s`` that is None:
+    the model's own limit from the cell size and the cruise speed).
+    """
+    ph = pl.section("physical", set(PHYSICAL_INTEGERS) | set(PHYSICAL_NUMBERS))
+    d = PhysicalSettings()
+    values: dict[str, Any] = {name: ph.integer(name) if ph.has(name) else getattr(d, name) for name in PHYSICAL_INTEGERS}
+    values.update({name: ph.number(name, unit=unit) if ph.has(name) else getattr(d, name)
+                   for name, unit in PHYSICAL_NUMBERS.items()})
+    try:
+        return PhysicalSettings(**values)
+    except PlannerError as exc:  # "physical.NAME: message"
+        key, _, message = str(exc).partition(": ")
+        raise doc.error(f"planning.{key}", message) from None
 
 
 def _signing(doc: _Doc, top: _Section, base: Path) -> Signing:

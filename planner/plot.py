@@ -30,9 +30,13 @@ from planner.headings import DI, DJ, N_HEADINGS, Direction
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from planner.grid import Grid
+    from planner.physical import PhysicalModel
+    from planner.physical_solve import PhysicalSolution, PhysicalStep
     from planner.settings import Goal
     from planner.solve import PathStep, Solution
     from planner.transitions import TransitionModel
+
+    AnySolution = Solution | PhysicalSolution
 
 __all__ = [
     "ACTION_COLORS",
@@ -73,7 +77,7 @@ _MAX_FLOW_ARROWS_PER_PANEL = 28
 def plot_flow_fields(
     u_m_s: NDArray[np.float64],
     v_m_s: NDArray[np.float64],
-    model: TransitionModel,
+    model: TransitionModel | PhysicalModel,
     path: str | os.PathLike[str],
     *,
     goal: Goal | None = None,
@@ -161,7 +165,7 @@ def plot_flow_fields(
 
 
 def plot_policy(
-    solution: Solution,
+    solution: AnySolution,
     path: str | os.PathLike[str],
     *,
     heading: int = 0,
@@ -175,7 +179,8 @@ def plot_policy(
     stay in the cell are dots or triangles (UP/DOWN), goal cells are dots inside
     a green outline, unreachable cells are crosses. The background is the
     cost-to-go of the state ``(l, j, i, heading)``. ``layer`` defaults to the
-    goal layer.
+    goal layer. For a physical plan the arrows follow each action's most likely
+    outcome and the cost-to-go is in Wh.
     """
     model = solution.model
     grid = model.grid
@@ -211,7 +216,7 @@ def plot_policy(
             if a in _ROTATE_MARKER:
                 markers.setdefault((a, _ROTATE_MARKER[a]), []).append((x, y))
                 continue
-            di, dj = _nominal_displacement(model, l, j, i, k, a)
+            di, dj = _nominal_displacement(solution, l, j, i, k, a)
             if di == 0 and dj == 0:
                 markers.setdefault((a, _STILL_MARKER[a]), []).append((x, y))
                 continue
@@ -233,7 +238,8 @@ def plot_policy(
                 markeredgewidth=1.2, zorder=4)
     _geo_axes(mpl, ax, grid)
     cbar = fig.colorbar(mesh, ax=ax, shrink=0.9, pad=0.02)
-    cbar.set_label(f"cost-to-go with heading {Direction(k).name} (energy units)")
+    unit = "Wh" if _is_physical(solution) else "energy units"
+    cbar.set_label(f"cost-to-go with heading {Direction(k).name} ({unit})")
 
     handles = []
     for a in Action:
@@ -259,15 +265,17 @@ def plot_policy(
     ax.set_title(
         f"Policy for heading {Direction(k).name} (k = {k}, bearing {bearing:.0f}\u00b0), "
         f"layer {l} ({grid.depth_m[l]:g} m)\n"
-        f"{model.settings.criterion}, {model.settings.uncertainty} uncertainty; "
-        f"arrows: nominal move, length \u221d tiles{thin}",
+        + (f"physical model, {model.settings.criterion}; arrows: most likely move, length \u221d tiles{thin}"
+           if _is_physical(solution) else
+           f"{model.settings.criterion}, {model.settings.uncertainty} uncertainty; "
+           f"arrows: nominal move, length \u221d tiles{thin}"),
         fontsize=11,
     )
     return _save(fig, path)
 
 
 def plot_nominal_path(
-    solution: Solution,
+    solution: AnySolution,
     start: tuple[int, int, int, int],
     path: str | os.PathLike[str],
 ) -> Path:
@@ -279,13 +287,13 @@ def plot_nominal_path(
     spends most steps; segments are coloured by the action taken, rotations are
     circular arrows, layer changes are labelled with their depths, and steps in
     another layer are dashed. Red marks the start, green the goal (paper Fig. 6).
+    For a physical plan the path is ``PhysicalSolution.nominal`` (each action's
+    most likely outcome) and the costs are in Wh.
     """
-    from planner.solve import nominal_path
-
     model = solution.model
     grid = model.grid
     start = _check_state(start, solution)
-    steps = nominal_path(solution, start)
+    steps = _nominal_steps(solution, start)
     layers_visited = Counter(s.l for s in steps)
     gl = solution.goal_cells.l
     lb = max(layers_visited, key=lambda ll: (layers_visited[ll], ll == gl, -ll))
@@ -368,7 +376,8 @@ def plot_nominal_path(
         handles.append(mpl.lines.Line2D([], [], color="0.45", linewidth=6.0, linestyle=(0, (2.0, 1.5)),
                                         label="step in another layer"))
     handles.append(mpl.lines.Line2D([], [], color=FLOW_ARROW_COLOR, marker=r"$\rightarrow$", linestyle="none",
-                                    markersize=12, label="flow direction (planner)"))
+                                    markersize=12, label="flow direction (paper model)" if _is_physical(solution)
+                                    else "flow direction (planner)"))
     if (model.flow_dir[lb] == -1).any():
         handles.append(mpl.lines.Line2D([], [], linestyle="none", marker=".", markersize=6,
                                         color=FLOW_ARROW_COLOR, label="calm"))
@@ -387,7 +396,7 @@ def plot_nominal_path(
     return _save(fig, path)
 
 
-def default_start(solution: Solution) -> tuple[int, int, int, int]:
+def default_start(solution: AnySolution) -> tuple[int, int, int, int]:
     """A reachable, non-goal state far from the goal, ``(l, j, i, k)``, for demos.
 
     Among the reachable water states of the goal layer with heading east, the
@@ -423,7 +432,7 @@ def default_start(solution: Solution) -> tuple[int, int, int, int]:
 def plot_all(
     u_m_s: NDArray[np.float64],
     v_m_s: NDArray[np.float64],
-    solution: Solution,
+    solution: AnySolution,
     out_dir: str | os.PathLike[str],
     *,
     start: tuple[int, int, int, int] | None = None,
@@ -519,7 +528,7 @@ def _check_layer(layer: int, grid: Grid) -> int:
     return int(layer)
 
 
-def _check_state(state: tuple[int, int, int, int], solution: Solution) -> tuple[int, int, int, int]:
+def _check_state(state: tuple[int, int, int, int], solution: AnySolution) -> tuple[int, int, int, int]:
     shape = solution.model.grid.shape
     try:
         l, j, i, k = (int(x) for x in state)
@@ -701,22 +710,43 @@ def _action_label(a: Action) -> str:
     return a.name.replace("_", " ").lower()
 
 
-def _nominal_displacement(model: TransitionModel, l: int, j: int, i: int, k: int, a: Action) -> tuple[int, int]:
-    """Horizontal displacement ``(di, dj)`` of the action's nominal outcome (spec section 5)."""
-    outs = model.outcomes(l, j, i, k, a)
+def _is_physical(solution: Any) -> bool:
+    return getattr(solution.model.settings, "model", "paper") == "physical"
+
+
+def _nominal_steps(solution: AnySolution, start: tuple[int, int, int, int]) -> list[Any]:
+    """The nominal path: ``planner.solve.nominal_path`` (paper) or ``PhysicalSolution.nominal``."""
+    if _is_physical(solution):
+        return solution.nominal(start)  # type: ignore[union-attr]
+    from planner.solve import nominal_path
+
+    return nominal_path(solution, start)  # type: ignore[arg-type]
+
+
+def _nominal_displacement(solution: AnySolution, l: int, j: int, i: int, k: int, a: Action) -> tuple[int, int]:
+    """Horizontal displacement ``(di, dj)`` of the action's nominal outcome (spec section 5); for a physical
+    plan, of the policy's pair's most likely outcome (ties: the first listed)."""
+    model = solution.model
+    if _is_physical(solution):
+        pair = int(solution.policy_pair[model.state_index(l, j, i, k)])  # type: ignore[union-attr]
+        if pair < 0:
+            return (0, 0)
+        (_, jj, ii, _), _, _ = max(model.outcomes(pair), key=lambda o: o[1])  # type: ignore[call-arg, arg-type]
+        return (ii - i, jj - j)
+    outs = model.outcomes(l, j, i, k, a)  # type: ignore[call-arg]
     if not outs:
         return (0, 0)
     _, jj, ii, _ = outs[0]
     return (ii - i, jj - j)
 
 
-def _layer_change_labels(steps: list[PathStep], grid: Grid) -> list[tuple[float, float, str, str]]:
+def _layer_change_labels(steps: list[PathStep] | list[PhysicalStep], grid: Grid) -> list[tuple[float, float, str, str]]:
     """Depth labels ``(lon, lat, text, colour)`` for the path's UP/DOWN actions.
 
     Layer changes within two cells of the previous one share a label, e.g.
     ``↓ 0 → 5 → 10 m``, so that a dive through several layers reads as one.
     """
-    clusters: list[list[tuple[PathStep, PathStep]]] = []
+    clusters: list[list[tuple[Any, Any]]] = []
     for s0, s1 in zip(steps[:-1], steps[1:]):
         if s0.action not in (Action.UP, Action.DOWN):
             continue
@@ -784,7 +814,9 @@ def _overlap_area(a: tuple[float, float, float, float], b: tuple[float, float, f
     return w * h if w > 0 and h > 0 else 0.0
 
 
-def _path_summary(solution: Solution, start: tuple[int, int, int, int], steps: list[PathStep]) -> str:
+def _path_summary(solution: AnySolution, start: tuple[int, int, int, int], steps: list[Any]) -> str:
+    if _is_physical(solution):
+        return _physical_path_summary(solution, start, steps)  # type: ignore[arg-type]
     grid = solution.model.grid
     settings = solution.model.settings
     l, j, i, k = start
@@ -812,6 +844,40 @@ def _path_summary(solution: Solution, start: tuple[int, int, int, int], steps: l
     if last != Action.AT_GOAL and math.isfinite(cost):
         lines.append("ends before the goal: the plan")
         lines.append("counts on a better outcome")
+    return "\n".join(lines)
+
+
+def _physical_path_summary(solution: PhysicalSolution, start: tuple[int, int, int, int],
+                           steps: list[PhysicalStep]) -> str:
+    """The side text of the nominal path picture for a physical plan: costs in Wh, times in hours."""
+    grid = solution.model.grid
+    settings = solution.model.settings
+    l, j, i, k = start
+    cost = float(solution.value_wh[l, j, i, k])
+    hours = float(solution.time_s[l, j, i, k]) / 3600.0
+    counts = Counter(s.action for s in steps[:-1])
+    path_h = sum(s.duration_s for s in steps[:-1]) / 3600.0
+    case = "worst" if settings.criterion == "robust" else "expected"
+    last = steps[-1].action
+    lines = [
+        f"start  {_lonlat(grid.lon_deg[i], grid.lat_deg[j])}",
+        f"       {grid.depth_m[l]:g} m, heading {Direction(k).name}",
+        f"goal   {_lonlat(grid.lon_deg[solution.goal_cells.i], grid.lat_deg[solution.goal_cells.j])}",
+        f"       {grid.depth_m[solution.goal_cells.l]:g} m, radius {solution.goal.radius_cells} cell(s)",
+        "",
+        f"plan (physical, {settings.criterion})",
+        f"predicted from start ({case} case):" if math.isfinite(cost) else "start cannot reach the goal",
+    ]
+    if math.isfinite(cost):
+        lines.append(f"  {cost:.1f} Wh, {hours:.2f} h to go")
+    lines.append("nominal path (most likely):")
+    lines.append(f"  {len(steps) - 1} actions, {path_h:.2f} h (mean)")
+    for a in Action:
+        if counts[a]:
+            lines.append(f"  {_action_label(a):<13}{counts[a]:>4}")
+    if last != Action.AT_GOAL and math.isfinite(cost):
+        lines.append("ends before the goal: the most")
+        lines.append("likely outcome repeats a state")
     return "\n".join(lines)
 
 

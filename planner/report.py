@@ -9,7 +9,8 @@ its log and, when the planning forecast was found, the plan made again from it
   the planning forecast and the nominal path from the first decision's state;
 - ``timeseries.png``: depth, heading, action and energy used against vehicle time;
 - ``cost.png`` (with a plan only): the predicted cost-to-go of the state at each
-  decision (spec section 8) against the energy actually spent;
+  decision (spec section 8; for a physical plan the energy still to spend, Wh, on
+  the same scale as the energy spent) against the energy actually spent;
 - ``index.html``: the pictures with the summary text, and a note for each
   picture that could not be drawn (or was drawn without something).
 
@@ -566,6 +567,18 @@ def _plot_timeseries(dive: Dive, path: Path) -> str:
 # --------------------------------------------------------------------------- cost.png
 
 
+def _plan_label(plan: PlanResult) -> str:
+    """The plan's model, criterion and costs, for titles."""
+    t = plan.table
+    if t.model == "physical":
+        v = (t.physical or {}).get("vehicle", {})
+        figures = f"; {v['cruise_speed_m_s']:g} m/s, hotel {v['hotel_w']:g} W" if {"cruise_speed_m_s", "hotel_w"} <= set(v) else ""
+        return f"physical model, {t.criterion}; costs in Wh{figures}"
+    c = t.costs
+    return (f"{t.criterion}; costs drift {c.get('drift')}, forward {c.get('forward')}, rotate {c.get('rotate')},"
+            f" glide {c.get('glide')}")
+
+
 def _cost_along_track(track: Track, plan: PlanResult, rows: NDArray[np.bool_]) -> NDArray[np.float64]:
     """The plan's cost-to-go of each row's table state (spec section 8), NaN where unreachable, where the row
     has no state, or where the row is not in ``rows`` (a mask: the rows driven by the planned table)."""
@@ -590,7 +603,8 @@ def _plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: b
     gaps = "no table state or unreachable" if whole else "another table, no table state or unreachable"
     line_cost, = ax.plot(t_h, cost[pick], color="#0072b2", linewidth=1.5, drawstyle="steps-post",
                          label=f"predicted cost-to-go of the state (gaps: {gaps})")
-    ax.set_ylabel("predicted cost-to-go (plan cost units)", color="#0072b2")
+    physical = plan.table.model == "physical"
+    ax.set_ylabel("predicted cost-to-go (Wh)" if physical else "predicted cost-to-go (plan cost units)", color="#0072b2")
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("vehicle time since the autopilot booted (h)")
     ax.grid(True, color="0.9", linewidth=0.6)
@@ -601,12 +615,15 @@ def _plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: b
         twin.set_ylim(bottom=min(0.0, float(np.nanmin(energy))))
     for a in (ax, twin):
         a.tick_params(labelsize=8.5)
-    c = plan.table.costs
+    if physical:  # the same unit on both axes: the prediction is the energy still to spend
+        hi = max(float(np.nanmax(cost)), float(np.nanmax(energy)) if np.isfinite(energy).any() else 0.0) * 1.05
+        ax.set_ylim(0.0, hi if hi > 0 else 1.0)
+        twin.set_ylim(min(0.0, float(np.nanmin(energy))) if np.isfinite(energy).any() else 0.0, hi if hi > 0 else 1.0)
     fig.legend(handles=[line_cost, line_energy], loc="outside lower center", ncols=2, frameon=False, fontsize=8.5)
     ax.set_title(f"{dive.log.path.name}: predicted cost-to-go along the track and the energy spent\n"
-                 f"plan {plan.table.crc32:08x} ({plan.table.criterion}; costs drift {c['drift']}, forward"
-                 f" {c['forward']}, rotate {c['rotate']}, glide {c['glide']})", fontsize=11)
+                 f"plan {plan.table.crc32:08x} ({_plan_label(plan)})", fontsize=11)
     _save(fig, path)
-    caption = ("The plan's predicted cost-to-go of the state at each decision (it falls to 0 at the goal),"
+    what = "energy still to spend, in Wh" if physical else "cost-to-go"
+    caption = (f"The plan's predicted {what}, of the state at each decision (it falls to 0 at the goal),"
                " and the energy the battery reports used")
     return caption + ("." if whole else f"; only the decisions under table {plan.table.crc32:08x} have a prediction.")

@@ -14,6 +14,7 @@ import os
 import struct
 import zlib
 from dataclasses import dataclass, field
+from dataclasses import fields as dataclass_fields
 from functools import cached_property
 from pathlib import Path
 from typing import Any, Literal
@@ -35,6 +36,9 @@ _CRC = struct.Struct("<I")
 MAX_STATES = 1 << 31
 
 LookupReason = Literal["ok", "at_goal", "unreachable", "outside_grid", "land"]
+# The vehicle figures a physical plan depends on (``VehicleParams``' other fields are the simulator's alone).
+PHYSICAL_VEHICLE_KEYS = ("cruise_speed_m_s", "max_speed_m_s", "yaw_rate_deg_s", "glide_rate_m_s", "hotel_w",
+                         "propulsion_w", "buoyancy_w", "battery_wh")
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +78,8 @@ class PolicyTable:
     planner_version: str
     actions: NDArray[np.uint8] = field(repr=False)  # (L, ny, nx, 8)
     water: NDArray[np.bool_] = field(repr=False)  # (L, ny, nx)
+    # Physical plans: {"vehicle": {...}, "sampling": {...}} (docs/policy-table.md); None for the paper model.
+    physical: dict[str, dict[str, float | int | None]] | None = None
 
     def __post_init__(self) -> None:
         shape = (len(self.depth_m), self.ny, self.nx)
@@ -104,6 +110,15 @@ class PolicyTable:
         grid = model.grid
         settings = model.settings
         goal = solution.goal
+        physical = None
+        costs = {"drift": settings.costs.drift, "forward": settings.costs.forward,
+                 "rotate": settings.costs.rotate, "glide": settings.costs.glide}
+        if settings.model == "physical":  # costs are watt-hours from the vehicle figures, not the paper's
+            costs = {}
+            physical = {
+                "vehicle": {key: getattr(settings.vehicle, key) for key in PHYSICAL_VEHICLE_KEYS},
+                "sampling": {f.name: getattr(settings.physical, f.name) for f in dataclass_fields(settings.physical)},
+            }
         return cls(
             lon0_deg=float(grid.lon_deg[0]),
             lat0_deg=float(grid.lat_deg[0]),
@@ -119,14 +134,14 @@ class PolicyTable:
             criterion=settings.criterion,
             uncertainty=settings.uncertainty,
             model=settings.model,
-            costs={"drift": settings.costs.drift, "forward": settings.costs.forward,
-                   "rotate": settings.costs.rotate, "glide": settings.costs.glide},
+            costs=costs,
             forecast_source=forecast_source,
             forecast_identity=forecast_identity,
             forecast_time=forecast_time,
             planner_version=__version__,
             actions=np.ascontiguousarray(solution.action, dtype=np.uint8),
             water=np.ascontiguousarray(model.water),
+            physical=physical,
         )
 
     # -- geometry -------------------------------------------------------------------
@@ -220,7 +235,7 @@ class PolicyTable:
     # -- identity -------------------------------------------------------------------
     def header(self) -> dict[str, Any]:
         """The JSON header, as documented in docs/policy-table.md."""
-        return {
+        out = {
             "grid": {
                 "lon0_deg": self.lon0_deg,
                 "lat0_deg": self.lat0_deg,
@@ -248,6 +263,9 @@ class PolicyTable:
             },
             "planner_version": self.planner_version,
         }
+        if self.physical is not None:  # optional: paper tables keep the bytes they always had
+            out["physical"] = {part: dict(values) for part, values in self.physical.items()}
+        return out
 
     # -- bytes ----------------------------------------------------------------------
     def to_bytes(self, *, compress: bool = True) -> bytes:
@@ -440,6 +458,14 @@ def _header_fields(header: Any) -> dict[str, Any]:
     fields["forecast_identity"] = _text(_key(forecast, "identity", "forecast"), "forecast.identity")
     when = _key(forecast, "time", "forecast")
     fields["forecast_time"] = None if when is None else _text(when, "forecast.time")
+    if "physical" in top:  # optional (physical plans); older readers never saw it
+        physical = _section(top["physical"], "physical")
+        fields["physical"] = {}
+        for part in ("vehicle", "sampling"):
+            values = _section(_key(physical, part, "physical"), f"physical.{part}")
+            # null: a sampling setting left to the model (max_transition_s)
+            fields["physical"][part] = {str(k): None if v is None and part == "sampling" else
+                                        _number(v, f"physical.{part}.{k}") for k, v in values.items()}
     return fields
 
 
@@ -466,6 +492,11 @@ def _float(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         raise TableError(f"{key}: expected a finite number; got {value!r}")
     return float(value)
+
+
+def _number(value: Any, key: str) -> float | int:
+    """A finite number, kept an int when it is one (whole-number settings stay whole)."""
+    return value if isinstance(value, int) and not isinstance(value, bool) else _float(value, key)
 
 
 def _int(value: Any, key: str) -> int:

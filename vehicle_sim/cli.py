@@ -64,6 +64,8 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--failsafe", default="surface", help=f"heartbeat failsafe action: {'|'.join(FAILSAFE_CHOICES)}")
     p.add_argument("--duration-s", help="stop after this many simulated seconds (default: run until stopped)")
     p.add_argument("--track", type=Path, help="CSV of the true track, one row per simulated second")
+    p.add_argument("--mission", type=Path,
+                   help="mission YAML whose vehicle figures (speeds, rates, power) the simulated vehicle takes")
     p.add_argument("--quiet", action="store_true", help="no summary on stderr at the end")
 
 
@@ -173,6 +175,12 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
                                     failsafe=FailsafeAction(args.failsafe)),
         track_path=args.track,
     )
+    if getattr(args, "mission", None) is not None:  # one set of vehicle figures for planner and simulator
+        from dataclasses import replace
+
+        from planner.mission import load_mission
+
+        config = replace(config, params=load_mission(args.mission).settings.vehicle)
     return world, config, duration
 
 

@@ -67,6 +67,8 @@ def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: st
     sim_cmd = [*lrauv, "sim", "--forecast", str(truth), "--start", start, "--depth-m", str(depth_m),
                "--heading-deg", str(heading_deg), "--speedup", str(speedup), "--listen", "127.0.0.1:0",
                "--seed", str(seed), "--track", str(track)]
+    if mission is not None:
+        sim_cmd += ["--mission", str(mission)]
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     ex: subprocess.Popen[str] | None = None
     try:
