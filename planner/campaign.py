@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from planner.actions import Action
+from planner.cluster import InProcess, Runner, chunks
 from planner.errors import PlannerError
 from planner.evaluate import (
     METHODS,
@@ -237,10 +238,22 @@ def all_runs(campaign: Campaign) -> list[tuple[str, int]]:
     return [(m, n) for n in range(len(campaign.starts)) for m in campaign.spec.methods]
 
 
-def run_all(campaign: Campaign, runs: Iterable[tuple[str, int]] | None = None) -> Campaign:
-    """Fly the runs here, one after another; the results in ``all_runs`` order."""
+def run_chunk(runs: Sequence[tuple[str, int]], campaign: Campaign) -> list[RunResult]:
+    """One task: fly some runs of a campaign (docs/scale-out.md: what a worker gets and returns)."""
+    return [run_one(campaign, m, n) for m, n in runs]
+
+
+def run_all(campaign: Campaign, runs: Iterable[tuple[str, int]] | None = None, *, runner: Runner | None = None) -> Campaign:
+    """Fly the runs, as tasks of ``runner`` (default: here, one after another); results in ``runs`` order.
+
+    Each task flies a contiguous piece of the runs; the campaign (plans, truth, starts) goes to
+    every worker once. Runs are deterministic, so any runner gives the same results.
+    """
     t = time.perf_counter()
-    results = tuple(run_one(campaign, m, n) for m, n in (all_runs(campaign) if runs is None else runs))
+    todo = list(all_runs(campaign) if runs is None else runs)
+    runner = runner or InProcess()
+    pieces = [[todo[i] for i in r] for r in chunks(len(todo), runner.workers)]
+    results = tuple(r for part in runner.map(run_chunk, pieces, campaign=campaign) for r in part)
     return replace(campaign, results=results, timings_s={**campaign.timings_s, "runs_s": time.perf_counter() - t})
 
 

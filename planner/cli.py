@@ -93,9 +93,11 @@ def build_parser() -> argparse.ArgumentParser:
     gyre.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
     gyre.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
 
+    from planner.batch import add_parser as add_batch
     from planner.evaluate_cli import add_parser as add_evaluate
 
     add_evaluate(sub)
+    add_batch(sub)
 
     # The vehicle side registers its own subcommands; their modules import nothing heavy.
     from executive.cli import add_parsers as add_executive
@@ -143,6 +145,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from planner.waypoints_cli import run as run_waypoints
 
             return run_waypoints(args)
+        if args.command == "batch":
+            from planner.batch import run as run_batch
+
+            return run_batch(args)
         if args.command == "evaluate":
             from planner.evaluate_cli import run as run_evaluate
 

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from planner.atomic import write_atomic
+from planner.cluster import add_arguments as add_cluster_arguments
 from planner.errors import PlannerError
 from planner.evaluate import METHODS, OUTCOMES, MethodSummary, RunResult, summarise
 
@@ -34,6 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
     p.add_argument("--resolution", action="store_true",
                    help="also plan the physical model on a grid of half the spacing and compare the starts' predictions")
     p.add_argument("--out", type=Path, help="write runs.csv, summary.json and PNG plots here")
+    add_cluster_arguments(p)
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
@@ -41,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from planner.campaign import CampaignSpec, prepare, resolution_change, run_all
+    from planner.cluster import open_runner
     from planner.cli import _mission_forecast
     from planner.mission import load_mission
     from vehicle_sim.world import WorldError, load_truth
@@ -64,8 +67,9 @@ def run(args: argparse.Namespace) -> int:
                         replan_s=None if args.replan_h is None else args.replan_h * 3600.0, time_index=args.time_index)
     note = (lambda _: None) if args.quiet else (lambda text: print(f"  {text}", file=sys.stderr, flush=True))
     campaign = prepare(spec, note=note)
-    note(f"{len(campaign.starts)} starts x {len(methods)} methods")
-    campaign = run_all(campaign)
+    with open_runner(args.scheduler, workers=args.workers) as runner:
+        note(f"{len(campaign.starts)} starts x {len(methods)} methods, {runner.describe()}")
+        campaign = run_all(campaign, runner=runner)
     summaries = summarise(campaign.results, methods)
     resolution = resolution_change(spec, campaign.starts) if args.resolution else None
     print(format_table(summaries))

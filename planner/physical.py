@@ -73,6 +73,7 @@ class PhysicalModel:
     duration_s: NDArray[np.float64]
     refine: int
     samples_per_action: int
+    members: int = 1  # forecast members whose samples make the outcomes
 
     @property
     def n_states(self) -> int:
@@ -155,11 +156,32 @@ def start_offsets(settings: PhysicalSettings) -> NDArray[np.float64]:
     return np.column_stack([di.ravel(), dj.ravel()])
 
 
-def build_physical(
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SampleStats:
+    """What the samples of one forecast member (or several, combined) say, per cell and channel.
+
+    ``count``/``emax`` (cells, channels, 25 outcome slots), ``esum``/``tsum``/``hazard`` (cells,
+    channels), the planning-grid currents ``u``/``v`` (L, ny, nx; NaN = land) and the ROTATE
+    energy ``rot_wh`` (L, ny, nx). Plain arrays: a Dask worker returns one per member.
+    """
+
+    count: NDArray[np.int32]
+    emax: NDArray[np.float64]
+    esum: NDArray[np.float64]
+    tsum: NDArray[np.float64]
+    hazard: NDArray[np.bool_]
+    n_samples: int
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    rot_wh: NDArray[np.float64]
+    members: int = 1
+
+
+def sample_transitions(
     u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], grid: Grid, settings: PlanSettings, *, refine: int,
     goal_mask: NDArray[np.bool_] | None = None,
-) -> PhysicalModel:
-    """Sample every water state's transitions; currents on ``fine_grid(grid, refine)``, NaN on land.
+) -> SampleStats:
+    """Sample every water cell's actions in one forecast member; currents on ``fine_grid(grid, refine)``.
 
     ``goal_mask`` (L, ny, nx): a FORWARD or DRIFT sample that enters a goal cell ends there, when
     it enters, as a vehicle arrives on entering the goal cells (not a cell spacing later).
@@ -170,20 +192,15 @@ def build_physical(
     vf = np.ascontiguousarray(v_fine_m_s, dtype=np.float64)
     if uf.shape != shape_f or vf.shape != shape_f:
         raise GridError(f"currents: expected shape {shape_f} on the refined grid; got {uf.shape} and {vf.shape}")
-    u = uf[:, ::refine, ::refine]
-    v = vf[:, ::refine, ::refine]
+    u = np.ascontiguousarray(uf[:, ::refine, ::refine])
+    v = np.ascontiguousarray(vf[:, ::refine, ::refine])
     water = np.isfinite(u) & np.isfinite(v)
-    for l in range(L):
-        if not water[l].any():
-            raise GridError(f"layer {l} at {grid.depth_m[l]:g} m is all land on this grid; "
-                            "choose shallower --depths or a bbox with water at that depth")
     ps, vp = settings.physical, settings.vehicle
-    dx_m, dy_m = grid.cell_size_m()
+    _dx_m, dy_m = grid.cell_size_m()
     t_max = transition_limit_s(grid, settings)
     bearing_rad = np.radians(grid.bearings_deg())  # (ny, 8), clockwise from north
     offsets = start_offsets(ps)
     members = member_offsets_m_s(ps)
-    n_samples = offsets.shape[0] * members.shape[0]
     count = np.zeros((L * ny * nx, N_CHANNELS, _SLOTS), dtype=np.int32)
     emax = np.zeros((L * ny * nx, N_CHANNELS, _SLOTS), dtype=np.float64)
     esum = np.zeros((L * ny * nx, N_CHANNELS), dtype=np.float64)
@@ -205,19 +222,79 @@ def build_physical(
     rot_s = 45.0 / vp.yaw_rate_deg_s
     speed = np.minimum(np.hypot(np.nan_to_num(u), np.nan_to_num(v)), vp.max_speed_m_s)
     rot_wh = np.ascontiguousarray(power_draw_w(vp, speed, False) * rot_s / 3600.0, dtype=np.float64)
-    arrays = _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples)
+    return SampleStats(count=count, emax=emax, esum=esum, tsum=tsum, hazard=hazard,
+                       n_samples=offsets.shape[0] * members.shape[0], u=u, v=v, rot_wh=rot_wh)
+
+
+def combine(stats: list[SampleStats]) -> SampleStats:
+    """Forecast members as outcomes: every member's samples together (docs/scale-out.md).
+
+    The worst case is then over all members' samples and the expected cost averages the members
+    (each has as many samples). A cell is water only where every member has water. Summed in
+    member order, so the result does not depend on where the members were sampled.
+    """
+    if not stats:
+        raise GridError("an ensemble needs at least one member")
+    first = stats[0]
+    if len(stats) == 1:
+        return first
+    shapes = {s.count.shape for s in stats}
+    if len(shapes) != 1 or len({s.n_samples for s in stats}) != 1:
+        raise GridError(f"ensemble members sampled on different grids or settings: {sorted(shapes)}")
+    count = first.count.copy()
+    emax = first.emax.copy()
+    esum = first.esum.copy()
+    tsum = first.tsum.copy()
+    hazard = first.hazard.copy()
+    u, v = first.u.copy(), first.v.copy()
+    rot = first.rot_wh.copy()
+    for s in stats[1:]:
+        count += s.count
+        np.maximum(emax, s.emax, out=emax)
+        esum += s.esum
+        tsum += s.tsum
+        hazard |= s.hazard
+        land = ~(np.isfinite(s.u) & np.isfinite(s.v))
+        u[land] = np.nan
+        v[land] = np.nan
+        rot = np.maximum(rot, s.rot_wh)
+    return SampleStats(count=count, emax=emax, esum=esum, tsum=tsum, hazard=hazard,
+                       n_samples=first.n_samples * len(stats), u=u, v=v, rot_wh=rot,
+                       members=sum(s.members for s in stats))
+
+
+def assemble(stats: SampleStats, grid: Grid, settings: PlanSettings, *, refine: int) -> PhysicalModel:
+    """The model the solvers walk, from (combined) samples."""
+    L = grid.n_layers
+    water = np.isfinite(stats.u) & np.isfinite(stats.v)
+    for l in range(L):
+        if not water[l].any():
+            raise GridError(f"layer {l} at {grid.depth_m[l]:g} m is all land on this grid; "
+                            "choose shallower --depths or a bbox with water at that depth")
+    rot_s = 45.0 / settings.vehicle.yaw_rate_deg_s
+    arrays = _pairs(stats.count, stats.emax, stats.esum, stats.tsum, stats.hazard, water, stats.rot_wh, rot_s,
+                    stats.n_samples)
     pair_state, pair_action, ptr, out_state, out_prob, out_emax, energy, duration = arrays
-    floor = ps.min_cost_wh
+    floor = settings.physical.min_cost_wh
     energy = np.maximum(energy, floor)
     out_emax = np.maximum(out_emax, floor)
-    flow = flow_directions(u, v, grid, calm_speed_m_s=settings.calm_speed_m_s)
+    flow = flow_directions(stats.u, stats.v, grid, calm_speed_m_s=settings.calm_speed_m_s)
     for arr in (water, flow, pair_state, pair_action, ptr, out_state, out_prob, out_emax, energy, duration):
         arr.setflags(write=False)
     return PhysicalModel(
         grid=grid, settings=settings, water=water, flow_dir=flow, pair_state=pair_state, pair_action=pair_action,
         ptr=ptr, out_state=out_state, out_prob=out_prob, out_energy_max_wh=out_emax, energy_wh=energy,
-        duration_s=duration, refine=refine, samples_per_action=n_samples,
+        duration_s=duration, refine=refine, samples_per_action=stats.n_samples, members=stats.members,
     )
+
+
+def build_physical(
+    u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], grid: Grid, settings: PlanSettings, *, refine: int,
+    goal_mask: NDArray[np.bool_] | None = None,
+) -> PhysicalModel:
+    """Sample and assemble the model of one forecast (see ``sample_transitions``)."""
+    return assemble(sample_transitions(u_fine_m_s, v_fine_m_s, grid, settings, refine=refine, goal_mask=goal_mask),
+                    grid, settings, refine=refine)
 
 
 # --------------------------------------------------------------------------- compiled kernels

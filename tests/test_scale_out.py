@@ -1,0 +1,168 @@
+"""Scale-out on a real Dask cluster (2 worker processes on 127.0.0.1): the same results as one process.
+
+Issue: ensembles, batch plans and Monte Carlo runs as Dask tasks; a local cluster by default,
+``--scheduler ADDRESS`` for an existing one; results bit for bit equal to single-process runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from planner.batch import BatchItem, collect, plan_item
+from planner.campaign import CampaignSpec, prepare, run_all
+from planner.cli import main
+from planner.cluster import IN_PROCESS, DaskRunner, InProcess, chunks
+from planner.double_gyre import DoubleGyreSettings, write_gyre
+from planner.mission import load_mission
+from vehicle_sim.world import World
+
+distributed = pytest.importorskip("distributed")
+
+GYRE = DoubleGyreSettings(spacing_deg=0.02, depths_m=(0.0,), hours=12.0, peak_speed_m_s=1.5)
+MISSION = """\
+name: gyre-{name}
+forecast: {{file: {forecast}, time_index: 0}}
+region: {{bbox: [-118.20, 33.30, -117.80, 33.467], nx: 21, ny: 9, depths_m: [0]}}
+vehicle: {{cruise_speed_m_s: 1.0}}
+planning: {{model: {model}, criterion: {criterion}}}
+goals:
+  - {{lat_deg: 33.385, lon_deg: -117.86, depth_m: 0, radius_cells: 1}}
+  - {{lat_deg: 33.40, lon_deg: -118.10, depth_m: 0, radius_cells: 1}}
+"""
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A real local cluster: 2 single-threaded worker processes; stopped at the end of the module."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  scheduler_port=0, silence_logs=40) as c, distributed.Client(c, set_as_default=False) as client:
+        yield c, DaskRunner(client, what="test cluster")
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("scale")
+    out = {"truth": write_gyre(d / "truth.nc", GYRE), "steady": write_gyre(d / "steady.nc", dataclasses.replace(GYRE, eps=0.0))}
+    for name, model, criterion in (("physical", "physical", "expected"), ("paper", "paper", "robust")):
+        path = d / f"{name}.yaml"
+        path.write_text(MISSION.format(name=name, forecast=out["steady"], model=model, criterion=criterion))
+        out[name] = path
+    return out
+
+
+def test_cluster_has_two_worker_processes(cluster):
+    c, runner = cluster
+    assert runner.workers == 2
+    pids = set(runner.client.run(lambda: __import__("os").getpid()).values())
+    assert len(pids) == 2 and __import__("os").getpid() not in pids
+
+
+def test_monte_carlo_on_dask_equals_one_process(cluster, files):
+    _c, runner = cluster
+    spec = CampaignSpec(mission=load_mission(files["physical"]), forecast_path=files["steady"],
+                        truth=World.load(files["truth"]), n_starts=6, dt_s=5.0, max_time_s=8 * 3600.0)
+    campaign = prepare(spec)
+    here = run_all(campaign, runner=InProcess())
+    there = run_all(campaign, runner=runner)
+    assert len(here.results) == 6 * len(spec.methods)
+    # repr round-trips every float exactly (and shows NaN, which == would not call equal)
+    assert [repr(r) for r in there.results] == [repr(r) for r in here.results]
+    assert {r.outcome for r in here.results} & {"arrived"}  # the comparison is about real runs
+
+
+def test_runs_are_split_across_both_workers(cluster, files):
+    _c, runner = cluster
+    seen = runner.map(_pid_of, list(range(8)))
+    assert len(set(seen)) == 2
+
+
+def _pid_of(_item: int) -> int:
+    import os
+    import time
+
+    time.sleep(0.2)  # long enough that one worker cannot take every task
+    return os.getpid()
+
+
+def test_batch_plans_on_dask_equal_one_process(cluster, files, tmp_path):
+    _c, runner = cluster
+    items = collect([files["physical"], files["paper"]], tmp_path, None)
+    assert [(i.vehicle, i.goal_index) for i in items] == [("physical", 0), ("physical", 1), ("paper", 0), ("paper", 1)]
+    here = InProcess().map(plan_item, items)
+    there = runner.map(plan_item, items)
+    assert all(r.error is None for r in here)
+    assert [r.table for r in there] == [r.table for r in here]
+    assert len({r.table for r in here}) == 4  # four different plans
+
+
+def test_batch_command_with_scheduler_address_writes_every_goal(cluster, files, tmp_path, capsys):
+    c, _runner = cluster
+    fleet = tmp_path / "fleet.yaml"
+    fleet.write_text(f"fleet:\n  - {{vehicle: alpha, mission: {files['physical']}}}\n"
+                     f"  - {{vehicle: beta, mission: {files['paper']}}}\n")
+    rc = main(["batch", str(fleet), "--out", str(tmp_path / "out"), "--scheduler", c.scheduler_address, "--quiet"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    written = sorted(p.relative_to(tmp_path / "out").as_posix() for p in (tmp_path / "out").rglob("*.lrpt"))
+    assert written == ["alpha/goal-0.lrpt", "alpha/goal-1.lrpt", "beta/goal-0.lrpt", "beta/goal-1.lrpt"]
+    single = plan_item(BatchItem(vehicle="x", goal_index=1, request=collect([files["paper"]], tmp_path, None)[1].request,
+                                 out=tmp_path / "x.lrpt"))
+    assert (tmp_path / "out" / "beta" / "goal-1.lrpt").read_bytes() == single.table
+
+
+def test_evaluate_with_scheduler_address_equals_in_process(cluster, files, tmp_path, capsys):
+    c, _runner = cluster
+    common = ["evaluate", str(files["physical"]), "--truth", str(files["truth"]), "--starts", "3", "--dt-s", "5",
+              "--max-hours", "6", "--quiet"]
+    assert main([*common, "--scheduler", c.scheduler_address, "--out", str(tmp_path / "dask")]) == 0
+    assert main([*common, "--scheduler", IN_PROCESS, "--out", str(tmp_path / "here")]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "dask" / "runs.csv").read_bytes() == (tmp_path / "here" / "runs.csv").read_bytes()
+
+
+def test_unreachable_scheduler_exits_2_with_one_line(files, tmp_path, capsys):
+    rc = main(["batch", str(files["paper"]), "--out", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.count("\n") == 1 and "tcp://127.0.0.1:9" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_fleet_file_errors_name_file_line_and_key(tmp_path, capsys):
+    fleet = tmp_path / "fleet.yaml"
+    fleet.write_text("fleet:\n  - {vehicle: a, mission: m.yaml}\n  - {vehicle: a, mission: n.yaml}\n")
+    assert main(["batch", str(fleet), "--out", str(tmp_path / "o"), "--scheduler", IN_PROCESS]) == 2
+    err = capsys.readouterr().err
+    assert f"{fleet}:3 fleet[1].vehicle" in err and "twice" in err
+    fleet.write_text("fleet:\n  - {vehicle: a, mision: m.yaml}\n")
+    assert main(["batch", str(fleet), "--out", str(tmp_path / "o"), "--scheduler", IN_PROCESS]) == 2
+    assert "fleet[0].mision" in capsys.readouterr().err
+
+
+def test_one_bad_goal_fails_the_batch_after_planning_the_others(files, tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(MISSION.format(name="bad", forecast=files["steady"], model="physical", criterion="expected")
+                   .replace("lon_deg: -118.10", "lon_deg: -119.50"))  # the second goal is off the grid
+    rc = main(["batch", str(bad), "--out", str(tmp_path / "o"), "--scheduler", IN_PROCESS])
+    out, err = capsys.readouterr()
+    assert rc == 2
+    assert (tmp_path / "o" / "bad" / "goal-0.lrpt").exists() and not (tmp_path / "o" / "bad" / "goal-1.lrpt").exists()
+    assert "failed     bad goal 1:" in out and "1 of 2 goals could not be planned" in err
+
+
+@pytest.mark.parametrize("n, workers", [(0, 2), (1, 2), (7, 2), (100, 2), (1000, 16), (5, 1)])
+def test_chunks_cover_every_run_once_in_order(n, workers):
+    parts = chunks(n, workers)
+    flat = [i for r in parts for i in r]
+    assert flat == list(range(n))
+    assert len(parts) <= max(1, workers * 4)
+    if n:
+        assert max(len(r) for r in parts) - min(len(r) for r in parts) <= max(len(r) for r in parts)
+
+
+def test_in_process_runner_passes_shared_arguments():
+    assert InProcess().map(lambda x, k: x * k, [1, 2, 3], k=np.int64(2)) == [2, 4, 6]
