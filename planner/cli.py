@@ -92,6 +92,25 @@ def build_parser() -> argparse.ArgumentParser:
     gyre.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.467)")
     gyre.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
     gyre.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+    # Options of planner.ensemble (the gyre's as above), here so that building the parser imports no xarray.
+    ens = fsub.add_parser("ensemble", help="write a synthetic forecast ensemble: one file, u/v with a leading member dimension")
+    ens.add_argument("out", type=Path)
+    ens.add_argument("--kind", choices=["gyre", "scb"], required=True,
+                     help="gyre: double gyres with drawn eps, phase and peak speed; scb: one SCB forecast issue, independent error draws")
+    ens.add_argument("--members", type=int, required=True, help="number of members, 1..1000")
+    ens.add_argument("--seed", type=int, default=0,
+                     help="gyre: seed of the members' draws; scb: the scenario's seed, as `lrauv forecast synth --seed` (default 0)")
+    ens.add_argument("--hours", type=float, help="forecast length in hours (gyre: default 48; scb: whole hours, default 72)")
+    ens.add_argument("--peak-speed-m-s", type=float, help="gyre: base peak speed, m/s; members x U[1 - spread, 1 + spread] (default 0.5)")
+    ens.add_argument("--eps", type=float, help="gyre: base eps; members draw eps from U[0, min(2 eps, 0.5)] (default 0.1)")
+    ens.add_argument("--spread", type=float, help="gyre: relative spread of the members' peak speed, 0 <= spread < 1 (default 0.2)")
+    ens.add_argument("--period-h", type=float, help="gyre: oscillation period in hours (default 12)")
+    ens.add_argument("--step-h", type=float, help="gyre: time step in hours (default 1)")
+    ens.add_argument("--spacing-deg", type=float, help="gyre: grid spacing in degrees (default 0.005)")
+    ens.add_argument("--bbox", help="gyre: WEST,SOUTH,EAST,NORTH in degrees (default -118.2,33.3,-117.8,33.467)")
+    ens.add_argument("--depths", help="gyre: layer depths in metres (default 0,5,10,15)")
+    ens.add_argument("--issue-time", help="gyre: ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+    ens.add_argument("--issue", type=int, help="scb: forecast issue of every member, its issue time and error size (default 0)")
 
     from planner.batch import add_parser as add_batch
     from planner.evaluate_cli import add_parser as add_evaluate
@@ -178,6 +197,11 @@ def _forecast(args: argparse.Namespace) -> int:
         if variables is not None and len(variables) != 2:
             raise PlannerError(f"--variables: expected two names U,V; got {args.variables}")
         print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))  # type: ignore[arg-type]
+        return 0
+    if args.forecast_command == "ensemble":
+        from planner.ensemble import write_ensemble_from_args
+
+        print(f"wrote {write_ensemble_from_args(args)}")
         return 0
     if args.forecast_command == "gyre":
         from planner.double_gyre import settings_from_args, write_gyre

@@ -43,7 +43,9 @@ phases, plus extra random plane waves. The error is scaled by a gain, fitted
 once per issue, so that over water on the issue's own grid and time window
 ``RMS|forecast - truth| / RMS|truth| = error_scale * error_decay ** n``
 (defaults 0.3 * 0.5**n), before the speed clip. A newer issue is closer to the
-truth.
+truth. ``error_draw`` (default None) picks one of many independent error draws
+of the same size for an issue (ensemble members, ``planner.ensemble``); None is
+the one draw that files without it have always had.
 
 Times: ``current_at`` takes seconds since ``settings.issue_time`` (the start of
 the scenario and the issue time of issue 0) for truth and every issue alike;
@@ -59,7 +61,7 @@ import datetime as dt
 import functools
 import os
 import pathlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import xarray as xr
@@ -215,6 +217,9 @@ class SyntheticSettings:
     error_scale: float = 0.3
     error_decay: float = 0.5
     issue_interval_h: float = 6.0
+    # Which independent error draw an issue uses: None (the default draw) or an integer >= 0
+    # (ensemble member; planner.ensemble). Left out of repr so that files without it keep their bytes.
+    error_draw: int | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         # Tuples of floats, so that settings stay hashable (scenes are cached per settings).
@@ -251,6 +256,11 @@ class SyntheticSettings:
             _check(np.isfinite(value) and value > 0, name, "a number > 0", value)
         _check(self.error_scale >= 0, "error_scale", "a number >= 0", self.error_scale)
         _check(0 < self.error_decay < 1, "error_decay", "a number in (0, 1)", self.error_decay)
+        _check(self.error_draw is None or (isinstance(self.error_draw, (int, np.integer))
+                                           and not isinstance(self.error_draw, bool) and self.error_draw >= 0),
+               "error_draw", "None or an integer >= 0", self.error_draw)
+        if self.error_draw is not None:
+            object.__setattr__(self, "error_draw", int(self.error_draw))
         if self.shoal_crest_m is not None:
             _check(0 < self.shoal_crest_m < self.basin_depth_m, "shoal_crest_m",
                    "None or a depth between 0 and basin_depth_m", self.shoal_crest_m)
@@ -428,11 +438,15 @@ def _truth_scene(settings: SyntheticSettings) -> _Scene:
 def _forecast_scene(settings: SyntheticSettings, issue_number: int) -> _Scene:
     """The truth's scene with errors of relative size ``error_scale * error_decay**n``.
 
-    Drawn from ``default_rng([seed, 1, n])``, independently per issue; the gain in
-    ``_error_gain`` then makes the relative RMS error exact.
+    Drawn from ``default_rng([seed, 1, n])``, independently per issue, or with
+    ``error_draw = k`` from ``default_rng([seed, 2, n, k])`` (independent draws
+    of the same size); the gain in ``_error_gain`` then makes the relative RMS error exact.
     """
     truth = _truth_scene(settings)
-    rng = np.random.default_rng([settings.seed, 1, issue_number])
+    if settings.error_draw is None:
+        rng = np.random.default_rng([settings.seed, 1, issue_number])
+    else:
+        rng = np.random.default_rng([settings.seed, 2, issue_number, settings.error_draw])
     a = settings.error_scale * settings.error_decay**issue_number
     ne = truth.eddy_x_km.size
     nw = settings.n_waves
@@ -669,13 +683,17 @@ def _global_attrs(
 ) -> dict[str, object]:
     """Global attributes: CF-1.8 plus ACDD discovery fields and the generator's inputs."""
     end = issued + dt.timedelta(hours=settings.hours)
+    # error_draw is left out of repr (files without it keep their bytes); a member's file says it here.
+    text, draw = repr(settings), ""
+    if settings.error_draw is not None:
+        text, draw = f"{text[:-1]}, error_draw={settings.error_draw})", f", error draw {settings.error_draw}"
     attrs: dict[str, object] = {
         "Conventions": "CF-1.8",
         "title": f"Synthetic ocean currents, Southern California Bight ({kind})",
         "institution": "lrauv-feedback project (synthetic data, not a model run)",
         "source": f"lrauv synthetic generator v{GENERATOR_VERSION} (planner.synthetic)",
         "history": (f"created by planner.synthetic v{GENERATOR_VERSION}, seed={settings.seed}, "
-                    f"issue={'truth' if issue_number is None else issue_number}; deterministic, no wall-clock time"),
+                    f"issue={'truth' if issue_number is None else issue_number}{draw}; deterministic, no wall-clock time"),
         "references": ("Orioke, Alam et al., Feedback Motion Planning for Long-Range Autonomous Underwater "
                        "Vehicles (region and layers); see planner/synthetic.py for the field's sources"),
         "comment": "Analytic eddies, shelf current, tides and plane waves; land is _FillValue (NaN).",
@@ -696,11 +714,13 @@ def _global_attrs(
         "geospatial_vertical_min": float(settings.depths_m[0]),
         "geospatial_vertical_max": float(settings.depths_m[-1]),
         "geospatial_vertical_positive": "down",
-        "settings": repr(settings),
+        "settings": text,
     }
     if issue_number is not None:
         attrs["issue_number"] = np.int64(issue_number)
         attrs["error_relative_rms"] = float(settings.error_scale * settings.error_decay**issue_number)
+        if settings.error_draw is not None:
+            attrs["error_draw"] = np.int64(settings.error_draw)
     return attrs
 
 
