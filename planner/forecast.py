@@ -16,25 +16,35 @@ Supported layouts:
   variable), lon/lat read from the file or computed from X/Y with the projection;
 - ROMS and CROCO native C-grid output: u/v averaged to rho points, land masks applied,
   rotated by ``angle``, s-levels converted to per-column depths.
+
+Large files and ensembles (docs/forecasts-large.md): ``open_forecast(path, bbox=,
+time_index=, member=)`` reads only a window of the file: the velocities are dask arrays
+(xarray chunks) until the time step, the ensemble member and, on regular lon/lat grids, the
+lon/lat ranges around the bbox are selected; only that part is read. ``forecast_times`` reads
+just the time axis, ``ensemble_size`` the number of members.
 """
 
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import inspect
 import os
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
 from planner.errors import ForecastError, GridError
+
+if TYPE_CHECKING:
+    from planner.grid import BBox
 
 # --------------------------------------------------------------------------------------
 # The Forecast value
@@ -68,6 +78,9 @@ class Forecast:
     # False when the first level is not the model's top level (CROCO files that keep only the
     # bottom s-levels): depths above the first level are not covered and count as land.
     covers_surface: bool = True
+    # Where this value sits in its file when only part of it was read (open_forecast with bbox=,
+    # time_index= or member=); None: the whole file.
+    window: ForecastWindow | None = None
 
     def __post_init__(self) -> None:
         src = self.source
@@ -112,11 +125,7 @@ class Forecast:
                     f"{src}: {name}: values {finite.min():g}..{finite.max():g} lie outside [-{bound:g}, {bound:g}] "
                     "degrees; expected longitudes and latitudes in degrees (check the coordinate variables and their units)"
                 )
-        if np.max(np.abs(time_s)) > _MAX_ABS_TIME_S:
-            raise ForecastError(
-                f"{src}: time_s: {np.max(np.abs(time_s)):g} s from the time origin; expected times within "
-                f"{_MAX_ABS_TIME_S:g} s (about 300,000 years) of it (check the time units)"
-            )
+        _check_time_range(time_s, src)
         if depth is None:
             if n_z != 1:
                 raise ForecastError(f"{src}: depth_m is None (no depth axis) but u/v have {n_z} levels; expected 1")
@@ -130,6 +139,8 @@ class Forecast:
             raise ForecastError(f"{src}: per-column depth_m: expected shape {u.shape}; got {depth.shape}")
         if self.time_origin is not None:
             _parse_origin(self.time_origin, src)
+        if self.window is not None:
+            _check_window(self.window, time_s.size, lon, lat, src)
         arrays = {"time_s": time_s, "u_east_m_s": u, "v_north_m_s": v, "lon_deg": lon, "lat_deg": lat}
         for name, arr in arrays.items():
             object.__setattr__(self, name, arr)
@@ -167,6 +178,97 @@ class Forecast:
             return None
         origin = _parse_origin(self.time_origin, self.source)
         return origin + np.round(self.time_s * 1000.0).astype("timedelta64[ms]")
+
+    def step_index(self, file_time_index: int) -> int:
+        """Index into ``time_s`` (and the velocities' T axis) of the file's time step ``file_time_index``.
+
+        The same number for a forecast that holds every step; 0 for a window opened with
+        ``time_index=file_time_index``. ForecastError when this value does not hold that step.
+        """
+        if isinstance(file_time_index, bool) or not isinstance(file_time_index, (int, np.integer)):
+            raise ForecastError(f"{self.source}: time index: expected an integer; got {file_time_index!r}")
+        index = int(file_time_index)
+        held = None if self.window is None else self.window.time_index
+        if held is None:
+            if not 0 <= index < self.n_times:
+                raise ForecastError(
+                    f"{self.source}: time index {index} out of range: the forecast has {self.n_times} time steps, "
+                    f"valid indices 0..{self.n_times - 1}"
+                )
+            return index
+        if index != held:
+            raise ForecastError(
+                f"{self.source}: time index {index}: this forecast was opened with time_index={held} and holds only "
+                f"that step of the file's {self.window.n_times}; open the file again with time_index={index}"  # type: ignore[union-attr]
+            )
+        return 0
+
+    @property
+    def file_lon_lat(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Longitudes and latitudes of the whole file's grid (this value's own unless it is a lon/lat window)."""
+        w = self.window
+        if w is not None and w.file_lon_deg is not None and w.file_lat_deg is not None:
+            return w.file_lon_deg, w.file_lat_deg
+        return self.lon_deg, self.lat_deg
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ForecastWindow:
+    """The part of its file a ``Forecast`` holds (``open_forecast`` with ``bbox=``, ``time_index=``, ``member=``).
+
+    Index ranges are ``[start, stop)`` along the file's axes as the Forecast orders them
+    (ascending lon/lat, a repeated +360 deg column dropped); None means the whole axis.
+    ``file_lon_deg``/``file_lat_deg`` are the whole file's 1-D axes of a regular grid when a
+    lon/lat window was cut (None otherwise): ``planner.resample`` takes its snapping
+    tolerance and longitude wrap from them, so a window resamples exactly as the whole file.
+    """
+
+    n_times: int  # time steps in the file
+    time_index: int | None = None  # the file's step held (time_s has that one value); None: every step
+    n_members: int = 1  # ensemble members in the file (1: no member dimension)
+    member: int | None = None  # the member held; None: opened without member=
+    member_dim: str | None = None
+    lon_index: tuple[int, int] | None = None
+    lat_index: tuple[int, int] | None = None
+    file_lon_deg: NDArray[np.float64] | None = None
+    file_lat_deg: NDArray[np.float64] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("file_lon_deg", "file_lat_deg"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, _frozen(value))
+        for name in ("lon_index", "lat_index"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, (int(value[0]), int(value[1])))
+
+
+def _check_window(w: ForecastWindow, n_t: int, lon: NDArray[np.float64], lat: NDArray[np.float64], src: str) -> None:
+    if not isinstance(w, ForecastWindow):
+        raise ForecastError(f"{src}: window: expected a ForecastWindow; got {type(w).__name__}")
+    if w.time_index is not None and (n_t != 1 or not 0 <= w.time_index < w.n_times):
+        raise ForecastError(
+            f"{src}: window: time step {w.time_index} of {w.n_times} held, so time_s must have one value; got {n_t}"
+        )
+    if w.member is not None and not 0 <= w.member < w.n_members:
+        raise ForecastError(f"{src}: window: member {w.member} out of range 0..{w.n_members - 1}")
+    for name, index, whole, axis in (
+        ("lon", w.lon_index, w.file_lon_deg, lon),
+        ("lat", w.lat_index, w.file_lat_deg, lat),
+    ):
+        if index is None:
+            continue
+        if whole is None or axis.ndim != 1 or not np.array_equal(whole[index[0] : index[1]], axis):
+            raise ForecastError(f"{src}: window: {name} index range {index} does not match the file's {name} axis")
+
+
+def _check_time_range(time_s: NDArray[np.float64], src: str) -> None:
+    if time_s.size and np.max(np.abs(time_s)) > _MAX_ABS_TIME_S:
+        raise ForecastError(
+            f"{src}: time_s: {np.max(np.abs(time_s)):g} s from the time origin; expected times within "
+            f"{_MAX_ABS_TIME_S:g} s (about 300,000 years) of it (check the time units)"
+        )
 
 
 def _frozen(a: Any) -> NDArray[np.float64]:
@@ -226,6 +328,13 @@ _LON_NAMES = {"lon", "longitude", "nav_lon", "lon_rho", "x_lon", "long", "lons"}
 _Y_NAMES = {"y", "yc", "eta", "eta_rho", "eta_u", "eta_v", "j", "ny", "rlat", "nj"}
 _X_NAMES = {"x", "xc", "xi", "xi_rho", "xi_u", "xi_v", "i", "nx", "rlon", "ni"}
 
+# Ensemble member dimensions: CF's standard_name "realization" (and its name), ECMWF/Copernicus
+# "number", and the common "member"/"ensemble"/"ens" spellings.
+_MEMBER_NAMES = {
+    "member", "members", "member_id", "ensemble_member", "realization", "realisation", "ensemble", "number", "ens",
+}  # fmt: skip
+_MEMBER_STANDARD_NAMES = {"realization", "realisation", "ensemble_member"}
+
 _DEG_EAST = {"degrees_east", "degree_east", "degree_e", "degrees_e", "degreee", "degreese"}
 _DEG_NORTH = {"degrees_north", "degree_north", "degree_n", "degrees_n", "degreen", "degreesn"}
 
@@ -249,6 +358,11 @@ _MAX_ABS_TIME_S = 1e13
 # arrays of this size at the peak): a larger file must be subset before planning. Checked
 # before anything is read, so a damaged header that claims a huge dimension costs nothing.
 MAX_VALUES_PER_VARIABLE = 100_000_000
+# With bbox=/time_index=/member=, the limit above applies to the part read, not to the file; the
+# 1-D axes still read whole (time, lon, lat) are refused beyond this length (a damaged header).
+MAX_AXIS_POINTS = 10_000_000
+# Nodes kept beyond the ones that the interpolation of a bbox uses, on each side (spec section 1).
+WINDOW_MARGIN_NODES = 2
 
 
 # What netCDF4/xarray/pyproj raise on damaged or unexpected files; wrapped into ForecastError.
@@ -523,12 +637,25 @@ def open_forecast(
     *,
     variables: tuple[str, str] | None = None,
     grid_file: str | os.PathLike[str] | None = None,
+    bbox: BBox | None = None,
+    time_index: int | None = None,
+    member: int | None = None,
 ) -> Forecast:
     """Read a current forecast file into a ``Forecast`` (east/north m/s, NaN = land; spec section 1).
 
     ``variables`` names the (u, v) variables when they cannot be found by CF standard name or
     common name. ``grid_file`` supplies what a ROMS/CROCO output file lacks (lon/lat, masks,
     h, angle). Every failure raises ``ForecastError`` naming the file and what to do.
+
+    Reading part of a file (docs/forecasts-large.md): ``time_index`` keeps one time step (the
+    Forecast's ``time_s`` then has that one value), ``member`` one ensemble member (required
+    when the file has a member dimension of more than one member), and ``bbox`` (a
+    ``planner.grid.BBox``), on regular lon/lat grids, the lon/lat index ranges that the bbox's
+    interpolation uses plus ``WINDOW_MARGIN_NODES`` nodes on each side (clipped at the file's
+    edges). The velocities are dask arrays until that selection is made, so only the selected
+    part is read. ``identity`` stays the whole file's; ``window`` says what was kept; resampling
+    the window onto a grid inside the bbox gives the whole file's values bit for bit. Curvilinear,
+    projected and ROMS/CROCO files keep their whole horizontal grid (``bbox`` is not used there).
     """
     label = os.fspath(path)
     if variables is not None:
@@ -538,6 +665,7 @@ def open_forecast(
             or not all(isinstance(n, str) and n for n in variables)
         ):
             raise ForecastError(f"{label}: variables: expected two variable names (U, V); got {variables!r}")
+    want = _Want.checked(label, bbox=bbox, time_index=time_index, member=member)
     ds, label, p = _open_dataset(path, "forecast file")
     grid_ds: xr.Dataset | None = None
     grid_label: str | None = None
@@ -551,7 +679,7 @@ def open_forecast(
             warnings.simplefilter("ignore", RuntimeWarning)
             # The file's hash is taken once its header has been checked: a damaged header that
             # claims gigabytes is refused before its bytes are read.
-            return _load(ctx, lambda: file_identity(p, label), variables)
+            return _load(ctx, lambda: file_identity(p, label), variables, want)
     except ForecastError:
         raise
     except GridError as exc:
@@ -567,6 +695,159 @@ def open_forecast(
             grid_ds.close()
 
 
+@dataclass(frozen=True, eq=False, kw_only=True)
+class ForecastTimes:
+    """A forecast file's time axis and ensemble size, read without its velocities (``forecast_times``).
+
+    ``source``, ``time_s`` and ``time_origin`` mean what they mean on a ``Forecast`` (the whole
+    file's steps), so ``nearest_time_index`` accepts this value too.
+    """
+
+    source: str
+    time_s: NDArray[np.float64]
+    time_origin: str | None
+    n_members: int = 1
+    member_dim: str | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "time_s", _frozen(self.time_s))
+
+    @property
+    def n_times(self) -> int:
+        return int(self.time_s.size)
+
+    @property
+    def times(self) -> NDArray[np.datetime64] | None:
+        if self.time_origin is None:
+            return None
+        origin = _parse_origin(self.time_origin, self.source)
+        return origin + np.round(self.time_s * 1000.0).astype("timedelta64[ms]")
+
+
+def forecast_times(path: str | os.PathLike[str], *, variables: tuple[str, str] | None = None) -> ForecastTimes:
+    """The time axis of a forecast file (seconds from its origin, as ``Forecast.time_s``), without reading currents.
+
+    Reads the header and the 1-D time coordinate of the velocity variables only, so it is cheap
+    for any file size: use it to turn a date into a time index before ``open_forecast(time_index=)``.
+    It makes the checks that ``open_forecast`` makes before it reads the time axis, in the same
+    order and with the same messages, so a broken file is refused here as it would be there.
+    """
+    return _scan(path, variables, times=True)
+
+
+def ensemble_size(path: str | os.PathLike[str], *, variables: tuple[str, str] | None = None) -> int:
+    """Number of ensemble members in a forecast file: the size of its member dimension, 1 when it has none.
+
+    Member dimensions are recognised by name (member, realization, ensemble, number, ens, ...) or
+    by the CF standard_name ``realization`` of their coordinate variable. Reads the header only;
+    it refuses only what makes the count unknowable (no such file, not netCDF, two member
+    dimensions), and leaves every other problem to ``open_forecast``. Without ``variables`` and
+    with velocity variables it cannot find, it counts the file's one member-like dimension.
+    """
+    return _scan(path, variables, times=False).n_members
+
+
+def _scan(path: str | os.PathLike[str], variables: tuple[str, str] | None, *, times: bool) -> ForecastTimes:
+    label = os.fspath(path)
+    if variables is not None and (
+        not isinstance(variables, (tuple, list)) or len(variables) != 2 or not all(isinstance(n, str) and n for n in variables)
+    ):
+        raise ForecastError(f"{label}: variables: expected two variable names (U, V); got {variables!r}")
+    ds, label, _ = _open_dataset(path, "forecast file")
+    try:
+        with warnings.catch_warnings(), np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)
+            if not times:
+                return _count_members(ds, label, variables)
+            # The checks of _load and its loaders that come before the time axis is read.
+            u_name, v_name, _ = _find_velocity_variables(ds, label, variables)
+            u_var, v_var = ds[u_name], ds[v_name]
+            for name, var in ((u_name, u_var), (v_name, v_var)):
+                _check_packing(var, name, label)
+                _check_numeric(var, f"variable {name}", label)
+            found = _member_dim(ds, u_var, v_var, u_name, v_name, label)
+            n_members = 1
+            if found is not None:
+                n_members = int(u_var.sizes[found])
+                u_var, v_var = u_var.isel({found: 0}), v_var.isel({found: 0})
+            for name, var in ((u_name, u_var), (v_name, v_var)):
+                _check_axes(var, name, label)
+            if _is_c_grid(ds, u_var, v_var):
+                time_dim = _c_grid_dims(ds, u_var, u_name, label).get("T")
+                _c_grid_dims(ds, v_var, v_name, label)
+            else:
+                if u_var.dims != v_var.dims or u_var.shape != v_var.shape:
+                    raise ForecastError(
+                        f"{label}: variables {u_name} {tuple(u_var.dims)} and {v_name} {tuple(v_var.dims)} are on "
+                        "different grids; expected both on the same (time, depth, lat, lon) grid, or a ROMS/CROCO "
+                        "C-grid with eta_/xi_ dims"
+                    )
+                time_dim = _assign_roles(ds, u_var, u_name, label).get("T")
+                for var, name in ((u_var, u_name), (v_var, v_name)):
+                    _velocity_factor(var, name, label, [])
+            time_s, origin = _read_time(ds, u_var, label, time_dim, [])
+            _check_time_range(time_s, label)
+            return ForecastTimes(source=label, time_s=time_s, time_origin=origin, n_members=n_members,
+                                 member_dim=found)
+    except ForecastError:
+        raise
+    except _LIBRARY_ERRORS as exc:
+        raise ForecastError(
+            f"{label}: could not read the forecast's header ({type(exc).__name__}: {exc}); the file may be "
+            "damaged or of an unsupported layout"
+        ) from exc
+    finally:
+        ds.close()
+
+
+def _count_members(ds: xr.Dataset, label: str, variables: tuple[str, str] | None) -> ForecastTimes:
+    try:
+        u_name, v_name, _ = _find_velocity_variables(ds, label, variables)
+    except ForecastError:
+        if variables is not None:
+            raise
+        # Velocities not found by name: open_forecast will say so; count a member-like dimension.
+        dims = [str(d) for d in ds.dims if str(d).lower() in _MEMBER_NAMES or (
+            str(d) in ds.variables and _attr(ds.variables[str(d)], "standard_name").lower() in _MEMBER_STANDARD_NAMES)]
+        n = int(ds.sizes[dims[0]]) if len(dims) == 1 else 1
+        return ForecastTimes(source=label, time_s=np.zeros(1), time_origin=None, n_members=n,
+                             member_dim=dims[0] if len(dims) == 1 else None)
+    u_var, v_var = ds[u_name], ds[v_name]
+    found = _member_dim(ds, u_var, v_var, u_name, v_name, label)
+    n = 1 if found is None else int(u_var.sizes[found])
+    return ForecastTimes(source=label, time_s=np.zeros(1), time_origin=None, n_members=n, member_dim=found)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Want:
+    """What part of the file to read: every field None reads the whole file (the default)."""
+
+    bbox: BBox | None = None
+    time_index: int | None = None
+    member: int | None = None
+
+    @property
+    def partial(self) -> bool:
+        return self.bbox is not None or self.time_index is not None or self.member is not None
+
+    @classmethod
+    def checked(cls, label: str, *, bbox: Any, time_index: Any, member: Any) -> _Want:
+        from planner.grid import BBox
+
+        if bbox is not None and not isinstance(bbox, BBox):
+            raise ForecastError(f"{label}: bbox: expected a planner.grid.BBox; got {type(bbox).__name__}")
+        for name, value in (("time_index", time_index), ("member", member)):
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ForecastError(f"{label}: {name}: expected an integer >= 0; got {value!r}")
+        return cls(
+            bbox=bbox,
+            time_index=None if time_index is None else int(time_index),
+            member=None if member is None else int(member),
+        )
+
+
 @dataclass(frozen=True, kw_only=True)
 class _Context:
     """The open file (and optional grid file) plus a label for error messages."""
@@ -575,6 +856,8 @@ class _Context:
     label: str
     grid_ds: xr.Dataset | None
     grid_label: str | None
+    # Selections (member, time step) applied to every variable found that has the dimension.
+    select: dict[str, int | slice] = field(default_factory=dict)
 
     def find(
         self, names: tuple[str, ...], shape: tuple[int, ...] | None = None
@@ -586,6 +869,9 @@ class _Context:
             for name in names:
                 if name in dset.variables:
                     var = dset[name]
+                    chosen = {d: s for d, s in self.select.items() if d in var.dims}
+                    if chosen:
+                        var = var.isel(chosen)
                     if shape is None or tuple(var.shape) == tuple(shape):
                         return name, var, str(where)
         return None
@@ -594,27 +880,89 @@ class _Context:
         return "" if self.grid_ds is not None else "; pass --grid-file GRID.nc (grid_file=) with the model grid"
 
 
-def _load(ctx: _Context, identity: Callable[[], str], variables: tuple[str, str] | None) -> Forecast:
+def _load(
+    ctx: _Context, identity: Callable[[], str], variables: tuple[str, str] | None, want: _Want = _Want()
+) -> Forecast:
     ds, label = ctx.ds, ctx.label
     u_name, v_name, kind = _find_velocity_variables(ds, label, variables)
     u_var, v_var = ds[u_name], ds[v_name]
+    member_note = None
+    member_info: tuple[str, int, int] | None = None  # (dimension, members, member held)
     for name, var in ((u_name, u_var), (v_name, v_var)):
         _check_packing(var, name, label)
         _check_numeric(var, f"variable {name}", label)
-        _check_size(var, name, label)
-    notes: list[str] = [f"variables: {u_name}, {v_name}" + _describe_std_names(u_var, v_var)]
-    if _is_c_grid(ds, u_var, v_var):
-        parts = _load_c_grid(ctx, u_name, v_name, kind, notes)
+    found = _member_dim(ds, u_var, v_var, u_name, v_name, label)
+    if found is not None and want.member is None and int(u_var.sizes[found]) == 1:
+        found = None  # one member and none asked for: read as before (a size-1 extra dimension is dropped)
+    if found is not None:
+        n_members = int(u_var.sizes[found])
+        if want.member is None and n_members > 1:
+            raise ForecastError(
+                f"{label}: {u_name}/{v_name} have an ensemble member dimension {found!r} with {n_members} members; "
+                f"expected one forecast: give member= (0..{n_members - 1}) to read one member, or plan the "
+                "ensemble with the CLI's ensemble planning"
+            )
+        k = 0 if want.member is None else want.member
+        if k >= n_members:
+            raise ForecastError(
+                f"{label}: member {k} out of range: the file has {n_members} ensemble member(s) along "
+                f"dimension {found!r}; expected member= in 0..{n_members - 1}"
+            )
+        u_var, v_var = u_var.isel({found: k}), v_var.isel({found: k})
+        ctx = replace(ctx, select={**ctx.select, found: k})
+        member_info = (found, n_members, k)
+        member_note = f"ensemble member {k} of {n_members} (dimension {found!r})"
+    elif want.member is not None and want.member != 0:
+        raise ForecastError(
+            f"{label}: member {want.member} out of range: the file has no ensemble member dimension (expected one "
+            f"named {', '.join(sorted(_MEMBER_NAMES))} or with standard_name realization), so it is one "
+            "forecast; only member=0 (or no member=) is valid"
+        )
+    if want.partial:
+        for name, var in ((u_name, u_var), (v_name, v_var)):
+            _check_axes(var, name, label)
     else:
-        parts = _load_structured(ctx, u_name, v_name, kind, notes)
+        for name, var in ((u_name, u_var), (v_name, v_var)):
+            _check_size(var, name, label)
+    notes: list[str] = [f"variables: {u_name}, {v_name}" + _describe_std_names(u_var, v_var)]
+    if member_note is not None:
+        notes.append(member_note)
+    if _is_c_grid(ds, u_var, v_var):
+        parts = _load_c_grid(ctx, u_var, v_var, u_name, v_name, kind, notes, want)
+    else:
+        parts = _load_structured(ctx, u_var, v_var, u_name, v_name, kind, notes, want)
     u, v = parts["u"], parts["v"]
     finite = np.isfinite(u) & np.isfinite(v)
-    if not np.any(finite):
+    part: str = parts.get("part", "")
+    if not np.any(finite) and parts.get("lon_index") is None:
+        if part:
+            raise ForecastError(
+                f"{label}: variables {u_name}/{v_name} hold no finite current values in the part read ({part}): "
+                "all missing, fill or land; expected at least one water point there; check the bbox, time step "
+                "and member, or pass --variables U,V to pick other variables"
+            )
         raise ForecastError(
             f"{label}: variables {u_name}/{v_name} hold no finite current values (all missing, fill or land); "
             "expected at least one water point; check the file or pass --variables U,V to pick other variables"
         )
+    if part:
+        # A lon/lat window may lie wholly on land (the file has water elsewhere); planning on it then
+        # says so, as it would on the whole file.
+        notes.append(f"read part of the file: {part}" + ("" if np.any(finite) else " (all land)"))
     notes.append(f"land (NaN in u or v): {100.0 * (1.0 - finite.mean()):.1f} % of values")
+    window = None
+    if want.partial or member_info is not None:
+        window = ForecastWindow(
+            n_times=parts["file_n_times"],
+            time_index=want.time_index,
+            n_members=1 if member_info is None else member_info[1],
+            member=None if member_info is None else member_info[2],
+            member_dim=None if member_info is None else member_info[0],
+            lon_index=parts.get("lon_index"),
+            lat_index=parts.get("lat_index"),
+            file_lon_deg=parts.get("file_lon"),
+            file_lat_deg=parts.get("file_lat"),
+        )
     return Forecast(
         source=label,
         identity=identity(),
@@ -628,7 +976,86 @@ def _load(ctx: _Context, identity: Callable[[], str], variables: tuple[str, str]
         notes=tuple(notes),
         variables=(u_name, v_name),
         covers_surface=parts.get("covers_surface", True),
+        window=window,
     )
+
+
+def _member_dim(
+    ds: xr.Dataset, u_var: xr.DataArray, v_var: xr.DataArray, u_name: str, v_name: str, label: str
+) -> str | None:
+    """The velocities' ensemble member dimension, or None (by name or CF standard_name realization)."""
+    found = []
+    for d in (str(d) for d in u_var.dims):
+        by_name = d.lower() in _MEMBER_NAMES
+        by_std = d in ds.variables and _attr(ds.variables[d], "standard_name").lower() in _MEMBER_STANDARD_NAMES
+        by_axis = d in ds.variables and _attr(ds.variables[d], "_CoordinateAxisType").lower() == "ensemble"
+        if by_name or by_std or by_axis:
+            found.append(d)
+    if not found:
+        return None
+    if len(found) > 1:
+        raise ForecastError(
+            f"{label}: {u_name} has several ensemble member dimensions {tuple(found)}; expected at most one"
+        )
+    d = found[0]
+    if d not in v_var.dims or v_var.sizes[d] != u_var.sizes[d]:
+        raise ForecastError(
+            f"{label}: {u_name} has the ensemble member dimension {d!r} ({u_var.sizes[d]} members) but {v_name} "
+            f"{tuple(str(x) for x in v_var.dims)} does not have it with the same size; expected both to have it"
+        )
+    return d
+
+
+def _check_axes(var: xr.DataArray, name: str, label: str) -> None:
+    """Refuse dimensions too long for their 1-D coordinates to be read whole (damaged headers), from the header."""
+    for d, size in zip(var.dims, var.shape):
+        if int(size) > MAX_AXIS_POINTS:
+            n = 1
+            for length in var.shape:
+                n *= int(length)
+            dims = " x ".join(f"{dd} {int(ss):,}" for dd, ss in zip(var.dims, var.shape))
+            raise ForecastError(
+                f"{label}: variable {name} declares {n:,} values ({dims}), {int(size):,} of them along {d}; expected "
+                f"at most {MAX_AXIS_POINTS:,} points along any dimension (its coordinates are read whole to find the "
+                "part to read): check a damaged dimension, or subset the file"
+            )
+
+
+def _have_dask() -> bool:
+    return importlib.util.find_spec("dask") is not None
+
+
+def _lazy(var: xr.DataArray) -> xr.DataArray:
+    """The variable as a dask array in "auto" chunks (nothing read yet), or as it is when dask is missing.
+
+    Selecting from it and computing reads only the selected part (dask fuses the slices into the
+    netCDF read; xarray's own lazy indexing does the same without dask).
+    """
+    if not _have_dask():
+        return var
+    return var.chunk("auto")
+
+
+def _computed(var: xr.DataArray) -> xr.DataArray:
+    """Values of a (possibly dask-backed) selection, computed in this thread (netCDF reads are not thread-safe)."""
+    if var.chunks is None:
+        return var
+    return var.compute(scheduler="synchronous")
+
+
+def _time_step(time_s: NDArray[np.float64], want: _Want, label: str) -> int | None:
+    """The time step to keep (None: every step); a partial read checks the whole time axis as a Forecast would."""
+    if want.partial:
+        _check_time_range(time_s, label)
+    if want.time_index is None:
+        return None
+    n = int(time_s.size)
+    if want.time_index >= n:
+        raise ForecastError(
+            f"{label}: time_index {want.time_index} out of range: the file has {n} time step(s); expected "
+            f"time_index in 0..{n - 1}"
+        )
+    return want.time_index
 
 
 def _check_numeric(var: xr.DataArray | xr.Variable, what: str, label: str) -> None:
@@ -648,13 +1075,18 @@ def _numbers(var: xr.DataArray | xr.Variable, what: str, label: str) -> NDArray[
     return np.asarray(var.values, dtype=np.float64)
 
 
-def _check_size(var: xr.DataArray, name: str, label: str) -> None:
-    """Refuse a velocity variable too large to load, from its declared shape alone."""
+def _check_size(var: xr.DataArray, name: str, label: str, *, part: str | None = None) -> None:
+    """Refuse a velocity variable (or, with ``part``, the selection from it) too large to load, from its shape alone."""
     n = 1
     for size in var.shape:
         n *= int(size)
     if n > MAX_VALUES_PER_VARIABLE:
         dims = " x ".join(f"{d} {int(s):,}" for d, s in zip(var.dims, var.shape))
+        if part is not None:
+            raise ForecastError(
+                f"{label}: the part of variable {name} to read ({part}) holds {n:,} values ({dims}); expected at "
+                f"most {MAX_VALUES_PER_VARIABLE:,}: give a smaller bbox, one time_index and one member"
+            )
         raise ForecastError(
             f"{label}: variable {name} declares {n:,} values ({dims}); expected at most "
             f"{MAX_VALUES_PER_VARIABLE:,} per velocity variable: subset the file to the region, depths and times "
@@ -952,42 +1384,105 @@ def _to_tzyx(var: xr.DataArray, roles: dict[str, str]) -> xr.DataArray:
     return var.transpose(*order)
 
 
-def _load_structured(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list[str]) -> dict[str, Any]:
+def _load_structured(
+    ctx: _Context,
+    u_var: xr.DataArray,
+    v_var: xr.DataArray,
+    u_name: str,
+    v_name: str,
+    kind: str,
+    notes: list[str],
+    want: _Want,
+) -> dict[str, Any]:
     ds, label = ctx.ds, ctx.label
-    u_var, v_var = ds[u_name], ds[v_name]
     if u_var.dims != v_var.dims or u_var.shape != v_var.shape:
         raise ForecastError(
             f"{label}: variables {u_name} {tuple(u_var.dims)} and {v_name} {tuple(v_var.dims)} are on different "
             "grids; expected both on the same (time, depth, lat, lon) grid, or a ROMS/CROCO C-grid with eta_/xi_ dims"
         )
     roles = _assign_roles(ds, u_var, u_name, label)
-    ydim, xdim = roles["Y"], roles["X"]
-    u = _velocity_values(_to_tzyx(u_var, roles), u_name, label, notes)
-    v = _velocity_values(_to_tzyx(v_var, roles), v_name, label, notes)
-    time_s, origin = _read_time(ds, u_var, label, roles.get("T"), notes)
-    depth = _read_depth_axis(ds, u_var, label, roles.get("Z"), notes)
-    if depth is not None and depth.size > 1 and depth[0] > depth[-1]:
+    ydim, xdim, tdim = roles["Y"], roles["X"], roles.get("T")
+    # Everything but the velocities' values is read first (units, time, depth, the lon/lat axes), so
+    # that the part to read is known before any value is; the notes keep the order of a whole read
+    # (velocities, time, depth, axes).
+    for var, name in ((u_var, u_name), (v_var, v_name)):
+        _velocity_factor(var, name, label, [])  # unit errors first, as before
+    later: list[str] = []
+    time_s, origin = _read_time(ds, u_var, label, tdim, later)
+    file_n_times = int(time_s.size)
+    depth = _read_depth_axis(ds, u_var, label, roles.get("Z"), later)
+    reverse_depth = depth is not None and depth.size > 1 and depth[0] > depth[-1]
+    if reverse_depth:
+        assert depth is not None
         depth = depth[::-1]
-        u, v = u[:, ::-1], v[:, ::-1]
-        notes.append("depth levels reversed to shallowest first")
+        later.append("depth levels reversed to shallowest first")
     if depth is not None and depth.size > 1 and np.any(np.diff(depth) <= 0):
         raise ForecastError(
             f"{label}: depth levels of {u_name}: expected strictly monotonic depths; got {depth.tolist()[:12]}"
         )
+    t = _time_step(time_s, want, label)
+    select: dict[str, slice] = {}
+    part: list[str] = []
+    if t is not None:
+        if tdim is not None:
+            select[tdim] = slice(t, t + 1)
+        time_s = time_s[t : t + 1]
+        part.append(f"time step {t} of {file_n_times}")
 
     xcoord = ds.variables[xdim] if xdim in ds.variables and ds.variables[xdim].ndim == 1 else None
     ycoord = ds.variables[ydim] if ydim in ds.variables and ds.variables[ydim].ndim == 1 else None
     grid_mapping = _grid_mapping_var(ds, u_var)
-    if xcoord is not None and ycoord is not None and _is_lon_like(xdim, xcoord) and _is_lat_like(ydim, ycoord):
-        # Regular lon/lat grid (spec section 1: separable interpolation).
-        lon = _numbers(xcoord, f"coordinate {xdim}", label)
-        lat = _numbers(ycoord, f"coordinate {ydim}", label)
-        lon, lat, u, v = _orient_regular(lon, lat, u, v, label, xdim, ydim, notes)
+    regular = xcoord is not None and ycoord is not None and _is_lon_like(xdim, xcoord) and _is_lat_like(ydim, ycoord)
+    window: dict[str, Any] = {}
+    orient: _Orientation | None = None
+    if regular:
+        assert xcoord is not None and ycoord is not None
+        orient = _orientation(
+            _numbers(xcoord, f"coordinate {xdim}", label), _numbers(ycoord, f"coordinate {ydim}", label),
+            label, xdim, ydim, later,
+        )
+        x0, x1, y0, y1 = 0, orient.lon.size, 0, orient.lat.size
+        if want.bbox is not None:
+            x0, x1, y0, y1 = _regular_window(orient.lon, orient.lat, want.bbox, label)
+            window = {
+                "lon_index": (x0, x1), "lat_index": (y0, y1), "file_lon": orient.lon, "file_lat": orient.lat,
+            }
+            part.append(
+                f"lon {orient.lon[x0]:.6g}..{orient.lon[x1 - 1]:.6g} ({x1 - x0} of {orient.lon.size} points), "
+                f"lat {orient.lat[y0]:.6g}..{orient.lat[y1 - 1]:.6g} ({y1 - y0} of {orient.lat.size})"
+            )
+        if want.partial:  # a whole read reads the repeated column too and drops it afterwards, as always
+            select[xdim] = orient.file_slice(x0, x1, axis="x")
+            select[ydim] = orient.file_slice(y0, y1, axis="y")
+
+    def values(var: xr.DataArray, name: str) -> NDArray[np.float64]:
+        if want.partial:
+            var = _lazy(var).isel(select)
+            _check_size(var, name, label, part="; ".join(part) or "the whole variable")
+            var = _computed(var)
+        elif select:
+            var = var.isel(select)
+        return _velocity_values(_to_tzyx(var, roles), name, label, notes)
+
+    u = values(u_var, u_name)
+    v = values(v_var, v_name)
+    if reverse_depth:
+        u, v = u[:, ::-1], v[:, ::-1]
+    notes.extend(later)
+    common = {"time_s": time_s, "time_origin": origin, "file_n_times": file_n_times, "part": "; ".join(part)}
+    if orient is not None:
+        u, v = orient.apply(u, whole=not want.partial), orient.apply(v, whole=not want.partial)
+        lon, lat = orient.lon, orient.lat
+        if want.bbox is not None:
+            lon, lat = lon[window["lon_index"][0] : window["lon_index"][1]], lat[window["lat_index"][0] : window["lat_index"][1]]
         if kind == "grid_xy":
             notes.append("x/y components on a regular lon/lat grid: x is east and y is north, no rotation")
         elif kind == "unknown":
             notes.append("no standard_name on the velocities: taken as eastward/northward on the lon/lat grid")
-        return {"u": u, "v": v, "lon": lon, "lat": lat, "depth": depth, "time_s": time_s, "time_origin": origin}
+        return {
+            "u": u, "v": v, "lon": np.ascontiguousarray(lon), "lat": np.ascontiguousarray(lat), "depth": depth,
+            **common, **window,
+        }
 
     ny, nx = int(u_var.sizes[ydim]), int(u_var.sizes[xdim])
     lonlat = _find_2d_lonlat(ctx, u_var, ydim, xdim)
@@ -1036,7 +1531,7 @@ def _load_structured(ctx: _Context, u_name: str, v_name: str, kind: str, notes: 
         angle = np.asarray(found[1].values, dtype=np.float64)
         u, v = _rotate(u, v, angle)
         notes.append(f"rotated grid x/y components to east/north by 'angle' from {found[2]}")
-    return {"u": u, "v": v, "lon": lon, "lat": lat, "depth": depth, "time_s": time_s, "time_origin": origin}
+    return {"u": u, "v": v, "lon": lon, "lat": lat, "depth": depth, **common}
 
 
 def _read_depth_axis(
@@ -1098,17 +1593,39 @@ def _read_depth_axis(
     return values
 
 
-def _orient_regular(
-    lon: NDArray[np.float64],
-    lat: NDArray[np.float64],
-    u: NDArray[np.float64],
-    v: NDArray[np.float64],
-    label: str,
-    xdim: str,
-    ydim: str,
-    notes: list[str],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+@dataclass(frozen=True, eq=False)
+class _Orientation:
+    """How a regular file's lon/lat axes become the Forecast's: flips to ascending, a repeated wrap column dropped."""
+
+    lon: NDArray[np.float64]  # the Forecast's axes (ascending, wrap column dropped)
+    lat: NDArray[np.float64]
+    flip_x: bool
+    flip_y: bool
+    drop_last_x: bool
+    n_x_file: int
+    n_y_file: int
+
+    def file_slice(self, start: int, stop: int, *, axis: str) -> slice:
+        """The file's index range of the Forecast's ``[start, stop)`` along lon ('x') or lat ('y')."""
+        flip, n = (self.flip_x, self.n_x_file) if axis == "x" else (self.flip_y, self.n_y_file)
+        return slice(n - stop, n - start) if flip else slice(start, stop)
+
+    def apply(self, a: NDArray[np.float64], *, whole: bool) -> NDArray[np.float64]:
+        """(T, Z, Y, X) values in file order -> the Forecast's order; ``whole``: all file columns were read."""
+        if self.flip_y:
+            a = a[:, :, ::-1, :]
+        if self.flip_x:
+            a = a[:, :, :, ::-1]
+        if whole and self.drop_last_x:
+            a = a[..., :-1]
+        return np.ascontiguousarray(a)
+
+
+def _orientation(
+    lon: NDArray[np.float64], lat: NDArray[np.float64], label: str, xdim: str, ydim: str, notes: list[str]
+) -> _Orientation:
     """Flip descending axes to ascending and drop a duplicated wrap-around column (spec section 1 grids)."""
+    n_x_file, n_y_file = lon.size, lat.size
     for name, axis, bound in ((xdim, lon, _MAX_ABS_LON_DEG), (ydim, lat, 90.0)):
         if not np.all(np.isfinite(axis)):
             raise ForecastError(f"{label}: coordinate {name} has missing values; expected finite degrees")
@@ -1117,14 +1634,17 @@ def _orient_regular(
                 f"{label}: coordinate {name}: values {axis.min():g}..{axis.max():g} lie outside [-{bound:g}, {bound:g}]; "
                 "expected degrees (check the variable and its units)"
             )
-    if lat.size > 1 and lat[0] > lat[-1]:
-        lat, u, v = lat[::-1], u[:, :, ::-1, :], v[:, :, ::-1, :]
+    flip_y = lat.size > 1 and lat[0] > lat[-1]
+    if flip_y:
+        lat = lat[::-1]
         notes.append(f"latitude {ydim} was descending: flipped to ascending")
-    if lon.size > 1 and lon[0] > lon[-1]:
-        lon, u, v = lon[::-1], u[:, :, :, ::-1], v[:, :, :, ::-1]
+    flip_x = lon.size > 1 and lon[0] > lon[-1]
+    if flip_x:
+        lon = lon[::-1]
         notes.append(f"longitude {xdim} was descending: flipped to ascending")
-    if lon.size > 2 and abs(lon[-1] - lon[0] - 360.0) < 1e-6:
-        lon, u, v = lon[:-1], u[..., :-1], v[..., :-1]
+    drop = lon.size > 2 and abs(lon[-1] - lon[0] - 360.0) < 1e-6
+    if drop:
+        lon = lon[:-1]
         notes.append(f"longitude {xdim}: last column repeats the first (+360 deg): dropped")
     for name, axis in ((xdim, lon), (ydim, lat)):
         if axis.size > 1 and np.any(np.diff(axis) <= 0):
@@ -1133,7 +1653,64 @@ def _orient_regular(
             )
     if is_periodic_lon(lon):
         notes.append("longitude spans 360 deg: treated as periodic (wraps at the date line)")
-    return np.ascontiguousarray(lon), np.ascontiguousarray(lat), np.ascontiguousarray(u), np.ascontiguousarray(v)
+    return _Orientation(
+        lon=np.ascontiguousarray(lon), lat=np.ascontiguousarray(lat), flip_x=bool(flip_x), flip_y=bool(flip_y),
+        drop_last_x=bool(drop), n_x_file=int(n_x_file), n_y_file=int(n_y_file),
+    )
+
+
+def _snap_bound(axis: NDArray[np.float64]) -> float:
+    """An upper bound of ``planner.resample``'s snapping tolerance on this axis (a thousandth of its spacing)."""
+    if axis.size < 2:
+        return 0.0
+    return 1e-3 * float(np.min(np.diff(axis)))
+
+
+def _bracket(axis: NDArray[np.float64], lo: float, hi: float) -> tuple[int, int]:
+    """Indices of the last node at or below ``lo`` and the first at or above ``hi`` (clipped to the axis)."""
+    i0 = int(np.searchsorted(axis, lo, side="right")) - 1
+    i1 = int(np.searchsorted(axis, hi, side="left"))
+    return max(i0, 0), min(i1, axis.size - 1)
+
+
+def _regular_window(
+    lon: NDArray[np.float64], lat: NDArray[np.float64], bbox: BBox, label: str
+) -> tuple[int, int, int, int]:
+    """``[x0, x1)`` and ``[y0, y1)`` of the nodes that resampling any grid inside ``bbox`` uses, plus the margin.
+
+    Targets are the bbox's longitudes moved by multiples of 360 deg into the axis' range, as
+    ``planner.resample`` moves them (a periodic axis counts its closing node, first + 360 deg).
+    A periodic axis whose window would need the seam keeps every column.
+    """
+    periodic = is_periodic_lon(lon)
+    axis = np.append(lon, lon[0] + 360.0) if periodic else lon
+    tol = _snap_bound(axis)
+    lo, hi = float(axis[0]) - tol, float(axis[-1]) + tol
+    west, east = float(bbox.west_deg), float(bbox.east_deg)
+    brackets = []
+    if east - west >= 360.0:
+        brackets.append((0, axis.size - 1))
+    else:
+        for k in range(int(np.ceil((lo - east) / 360.0)), int(np.floor((hi - west) / 360.0)) + 1):
+            p, q = max(west + 360.0 * k, lo), min(east + 360.0 * k, hi)
+            if p <= q:
+                brackets.append(_bracket(axis, p, q))
+    tol_y = _snap_bound(lat)
+    p_y, q_y = max(float(bbox.south_deg), float(lat[0]) - tol_y), min(float(bbox.north_deg), float(lat[-1]) + tol_y)
+    if not brackets or p_y > q_y:
+        raise ForecastError(
+            f"{label}: bbox {bbox.west_deg:g},{bbox.south_deg:g},{bbox.east_deg:g},{bbox.north_deg:g} lies outside the "
+            f"forecast, which covers lon {lon[0]:.4f}..{lon[-1]:.4f}, lat {lat[0]:.4f}..{lat[-1]:.4f}; expected a bbox "
+            "that overlaps it"
+        )
+    i0, i1 = min(b[0] for b in brackets), max(b[1] for b in brackets)
+    if periodic and i1 >= lon.size:  # the closing node is column 0 again: keep the whole circle
+        x0, x1 = 0, lon.size
+    else:
+        x0, x1 = max(i0 - WINDOW_MARGIN_NODES, 0), min(i1 + WINDOW_MARGIN_NODES, lon.size - 1) + 1
+    j0, j1 = _bracket(lat, p_y, q_y)
+    y0, y1 = max(j0 - WINDOW_MARGIN_NODES, 0), min(j1 + WINDOW_MARGIN_NODES, lat.size - 1) + 1
+    return x0, x1, y0, y1
 
 
 def _find_2d_lonlat(
@@ -1258,9 +1835,17 @@ def _rotate(
 # --------------------------------------------------------------------------------------
 
 
-def _load_c_grid(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list[str]) -> dict[str, Any]:
+def _load_c_grid(
+    ctx: _Context,
+    u_var: xr.DataArray,
+    v_var: xr.DataArray,
+    u_name: str,
+    v_name: str,
+    kind: str,
+    notes: list[str],
+    want: _Want,
+) -> dict[str, Any]:
     ds, label = ctx.ds, ctx.label
-    u_var, v_var = ds[u_name], ds[v_name]
     hint = ctx.grid_hint()
 
     lon_found = ctx.find(("lon_rho",)) or None
@@ -1295,6 +1880,25 @@ def _load_c_grid(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list
             f"{label}: {u_name} {tuple(u_var.dims)} and {v_name} {tuple(v_var.dims)} have different time/level "
             "dimensions; expected the same"
         )
+    # One time step (time_index=): the time axis is read first and the step selected before any value.
+    early: tuple[NDArray[np.float64], str | None] | None = None
+    time_notes: list[str] = []
+    t = None
+    part = ""
+    if want.partial:
+        for var, name in ((u_var, u_name), (v_var, v_name)):
+            _velocity_factor(var, name, label, [])  # unit errors first, as before
+        early = _read_time(ds, u_var, label, u_roles.get("T"), time_notes)
+        t = _time_step(early[0], want, label)
+        if t is not None:
+            part = f"time step {t} of {early[0].size}"
+            if "T" in u_roles:
+                step = {u_roles["T"]: slice(t, t + 1)}
+                u_var, v_var = _lazy(u_var).isel(step), _lazy(v_var).isel(step)
+                ctx = replace(ctx, select={**ctx.select, **step})
+        for var, name in ((u_var, u_name), (v_var, v_name)):
+            _check_size(var, name, label, part=part or "the whole variable")
+        u_var, v_var = _computed(_lazy(u_var)), _computed(_lazy(v_var))
     u = _velocity_values(_to_c_tsyx(u_var, u_roles), u_name, label, notes)
     v = _velocity_values(_to_c_tsyx(v_var, v_roles), v_name, label, notes)
     (nyu, nxu), (nyv, nxv) = u.shape[-2:], v.shape[-2:]
@@ -1356,7 +1960,14 @@ def _load_c_grid(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list
             f"({np.nanmin(angle):.4g}..{np.nanmax(angle):.4g} rad)"
         )
 
-    time_s, origin = _read_time(ds, u_var, label, u_roles.get("T"), notes)
+    if early is None:
+        time_s, origin = _read_time(ds, u_var, label, u_roles.get("T"), notes)
+    else:
+        time_s, origin = early
+        notes.extend(time_notes)
+    file_n_times = int(time_s.size)
+    if t is not None:
+        time_s = time_s[t : t + 1]
     depth = None
     covers_surface = True
     if "S" in u_roles and _dim_role(ds, u_roles["S"]) != "S":
@@ -1381,6 +1992,8 @@ def _load_c_grid(ctx: _Context, u_name: str, v_name: str, kind: str, notes: list
         "time_s": time_s,
         "time_origin": origin,
         "covers_surface": covers_surface,
+        "file_n_times": file_n_times,
+        "part": part,
     }
 
 
@@ -1546,8 +2159,11 @@ def _s_level_depths(
 # --------------------------------------------------------------------------------------
 
 
-def nearest_time_index(forecast: Forecast, when: np.datetime64) -> int:
+def nearest_time_index(forecast: Forecast | ForecastTimes, when: np.datetime64) -> int:
     """Index of the forecast time nearest to ``when`` (ties: the earlier step).
+
+    ``forecast`` may be a ``ForecastTimes`` (``forecast_times(path)``): the index is then the
+    file's, ready for ``open_forecast(path, time_index=...)``.
 
     Raises ForecastError when the forecast has no reference date, or when ``when`` lies more
     than one time step before the first or after the last time (a one-step forecast allows one day).
@@ -1576,7 +2192,7 @@ def nearest_time_index(forecast: Forecast, when: np.datetime64) -> int:
     return int(np.argmin(np.abs(times - offset_s)))
 
 
-def _iso(forecast: Forecast, t_s: float) -> str:
+def _iso(forecast: Forecast | ForecastTimes, t_s: float) -> str:
     if forecast.time_origin is None:
         return f"{t_s:g} s"
     origin = _parse_origin(forecast.time_origin, forecast.source)

@@ -89,15 +89,19 @@ class _AxisWeights:
     valid: NDArray[np.bool_]
 
 
-def _axis_weights(src: NDArray[np.float64], x: NDArray[np.float64], *, below: str) -> _AxisWeights:
+def _axis_weights(
+    src: NDArray[np.float64], x: NDArray[np.float64], *, below: str, tol: float | None = None
+) -> _AxisWeights:
     """Weights of targets ``x`` on the ascending axis ``src``.
 
     ``below`` says what a target before ``src[0]`` gets: 'land' or 'first' (the first node,
     spec section 1's rule for layers shallower than the first level). After ``src[-1]``: land.
+    ``tol``: the snapping tolerance (default: ``src``'s own; a window of a file passes the file's).
     """
     x = np.asarray(x, dtype=np.float64)
     n = src.size
-    tol = _axis_snap_tol(src)
+    if tol is None:
+        tol = _axis_snap_tol(src)
     k = np.searchsorted(src, x, side="left")  # src[k-1] < x <= src[k]
     lo = np.clip(k - 1, 0, n - 1)
     hi = np.clip(k, 0, n - 1)
@@ -204,18 +208,24 @@ def _shift_lon(x: NDArray[np.float64], lo: float, hi: float) -> NDArray[np.float
     return out
 
 
+def _lon_axis(lon: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The longitude axis interpolation runs on: a periodic axis gets its closing node (first + 360 deg)."""
+    return np.append(lon, lon[0] + 360.0) if is_periodic_lon(lon) else lon
+
+
 def _resample_regular(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     lon_src, lat_src = forecast.lon_deg, forecast.lat_deg
     n_x = lon_src.size
-    periodic = is_periodic_lon(lon_src)
-    if periodic:
-        lon_axis = np.append(lon_src, lon_src[0] + 360.0)
-    else:
-        lon_axis = lon_src
-    tol = _axis_snap_tol(lon_axis)
-    tx = _shift_lon(grid.lon_deg, lon_axis[0] - tol, lon_axis[-1] + tol)
-    ax = _axis_weights(lon_axis, tx, below="land")
-    ay = _axis_weights(lat_src, grid.lat_deg, below="land")
+    lon_axis = _lon_axis(lon_src)
+    # A lon/lat window of a file (open_forecast(bbox=)) snaps and wraps as the whole file does:
+    # tolerances and the longitude shift come from the file's axes, the weights from the window's
+    # nodes, which are the file's nodes around the bbox.
+    file_lon, file_lat = forecast.file_lon_lat
+    file_lon_axis = _lon_axis(file_lon)
+    tol = _axis_snap_tol(file_lon_axis)
+    tx = _shift_lon(grid.lon_deg, file_lon_axis[0] - tol, file_lon_axis[-1] + tol)
+    ax = _axis_weights(lon_axis, tx, below="land", tol=tol)
+    ay = _axis_weights(lat_src, grid.lat_deg, below="land", tol=_axis_snap_tol(file_lat))
     ix0, ix1 = ax.i0 % n_x, ax.i1 % n_x
 
     rows = np.unique(np.concatenate([ay.i0[ay.valid], ay.i1[ay.valid]]))
