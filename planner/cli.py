@@ -40,7 +40,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     plan = sub.add_parser("plan", help="plan a feedback policy and write the policy table")
     plan.add_argument("mission", nargs="?", type=Path, help="mission YAML file (flags below override it)")
-    plan.add_argument("--forecast", type=Path, help="forecast netCDF file")
+    plan.add_argument("--forecast", type=Path, nargs="+", metavar="FILE",
+                      help="forecast netCDF file; several files (or a file with a member dimension) are the members "
+                           "of an ensemble, the outcomes of the physical model")
     plan.add_argument("--variables", type=lambda t: t.split(","), help="U,V variable names, when not found by CF standard names")
     plan.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
     plan.add_argument("--bbox", type=lambda t: floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
@@ -66,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     plan.add_argument("--plot-layer", type=int, help="layer for the policy picture (default: the goal's)")
     plan.add_argument("--start", type=lambda t: floats(t, 4, "start"), help="LON,LAT,DEPTH,HEADING_DEG for the nominal path")
     plan.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    from planner.cluster import add_arguments as add_cluster_arguments
+
+    add_cluster_arguments(plan)  # used when there is parallel work: several forecast members
 
     fc = sub.add_parser("forecast", help="inspect or generate forecasts")
     fsub = fc.add_subparsers(dest="forecast_command", required=True)
@@ -114,9 +119,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     from planner.batch import add_parser as add_batch
     from planner.evaluate_cli import add_parser as add_evaluate
+    from planner.holdout import add_parser as add_holdout
 
     add_evaluate(sub)
     add_batch(sub)
+    add_holdout(sub)
 
     # The vehicle side registers its own subcommands; their modules import nothing heavy.
     from executive.cli import add_parsers as add_executive
@@ -164,6 +171,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from planner.waypoints_cli import run as run_waypoints
 
             return run_waypoints(args)
+        if args.command == "holdout":
+            from planner.holdout import run as run_holdout
+
+            return run_holdout(args)
         if args.command == "batch":
             from planner.batch import run as run_batch
 
@@ -227,7 +238,8 @@ def _plan(args: argparse.Namespace) -> int:
 
         mission = load_mission(args.mission)
     # Forecast: the flag, else the mission's source.
-    forecast_path = args.forecast
+    forecast_path = args.forecast[0] if args.forecast else None
+    ensemble = tuple(args.forecast[1:]) if args.forecast else ()
     time_index, time_iso = args.time_index, args.time
     variables = tuple(args.variables) if args.variables else None
     grid_file = args.grid_file
@@ -284,7 +296,7 @@ def _plan(args: argparse.Namespace) -> int:
     request = PlanRequest(
         forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,
         bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,  # type: ignore[arg-type]
-        grid_file=grid_file,
+        grid_file=grid_file, ensemble=ensemble,
     )
     out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
     t0 = time.perf_counter()
@@ -292,7 +304,17 @@ def _plan(args: argparse.Namespace) -> int:
     if progress:
         how = f"physical, {settings.criterion}" if physical else f"{settings.criterion}, {settings.uncertainty}"
         print(f"planning on {forecast_path} ({how})", file=sys.stderr)
-    result = make_plan(request, progress=progress)
+    from planner.plan import members_of
+
+    if len(members_of(request)) > 1:
+        from planner.cluster import open_runner
+
+        with open_runner(args.scheduler, workers=args.workers) as runner:
+            if progress:
+                print(f"  {len(members_of(request))} forecast members, sampled: {runner.describe()}", file=sys.stderr)
+            result = make_plan(request, progress=progress, runner=runner)
+    else:
+        result = make_plan(request, progress=progress)
     data = result.table.to_bytes(compress=not args.no_compress)
     from planner.atomic import write_atomic
 
@@ -302,7 +324,7 @@ def _plan(args: argparse.Namespace) -> int:
     reachable = int(sol.reachable.sum())
     raw = len(result.table.to_bytes(compress=False))
     print(f"table      {out}  ({len(data):,} bytes; {raw:,} uncompressed; {result.grid.n_states:,} states)")
-    print(f"forecast   {result.forecast.source} [{result.forecast.identity}] step {result.time_index}"
+    print(f"forecast   {result.table.forecast_source} [{result.table.forecast_identity}] step {result.time_index}"
           f" ({result.table.forecast_time or 'no reference date'})")
     print(f"grid       {result.grid.nx} x {result.grid.ny} cells x {result.grid.n_layers} layers"
           f" ({', '.join(f'{d:g}' for d in result.grid.depth_m)} m) x 8 headings")

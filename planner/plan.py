@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import io
 import os
 import sys
@@ -12,8 +13,17 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.errors import ForecastError, GridError
-from planner.forecast import Forecast, nearest_time_index, open_forecast
+from planner.cluster import InProcess, Runner
+from planner.errors import ForecastError, GridError, PlannerError
+from planner.forecast import (
+    Forecast,
+    ForecastTimes,
+    ensemble_size,
+    file_identity,
+    forecast_times,
+    nearest_time_index,
+    open_forecast,
+)
 from planner.resample import resample
 from planner.grid import BBox, Grid
 from planner.settings import Goal, PlanSettings
@@ -21,7 +31,16 @@ from planner.solve import Solution, goal_cells_on, solve
 from planner.atomic import write_atomic
 from planner.table import PolicyTable
 from planner.transitions import TransitionModel, build_transitions
-from planner.physical import PhysicalModel, build_physical, fine_grid, refine_factor
+from planner.physical import (
+    PhysicalModel,
+    SampleStats,
+    assemble,
+    build_physical,
+    combine,
+    fine_grid,
+    refine_factor,
+    sample_transitions,
+)
 from planner.physical_solve import PhysicalSolution, solve_physical
 
 
@@ -40,6 +59,8 @@ class PlanRequest:
     time_iso: str | None = None
     variables: tuple[str, str] | None = None
     grid_file: Path | None = None
+    ensemble: tuple[Path, ...] = ()  # further forecast files: members of an ensemble (physical model)
+    members: tuple[MemberRef, ...] | None = None  # explicit members, instead of every member of the files
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -76,7 +97,7 @@ def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
 
 def native_spacing_deg(forecast: Forecast) -> float | None:
     """The forecast's own lon/lat spacing (the finer), or None for a curvilinear grid."""
-    lon, lat = forecast.lon_deg, forecast.lat_deg
+    lon, lat = forecast.file_lon_lat  # the whole file's axes, also for a window (open_forecast(bbox=))
     if lon.ndim != 1 or lon.size < 2 or lat.size < 2:
         return None
     return float(min(np.abs(np.diff(lon)).min(), np.abs(np.diff(lat)).min()))
@@ -94,7 +115,7 @@ def check_coverage(forecast: Forecast, grid: Grid) -> None:
         )
 
 
-def choose_time_index(forecast: Forecast, request: PlanRequest) -> int:
+def choose_time_index(forecast: Forecast | ForecastTimes, request: PlanRequest) -> int:
     """``--time-index`` by position, or the step nearest to ``--time``; default the first step."""
     if request.time_iso is not None:
         try:
@@ -119,23 +140,107 @@ def forecast_time_iso(forecast: Forecast, index: int) -> str | None:
     return str(origin + np.timedelta64(int(round(forecast.time_s[index])), "s")) + "Z"
 
 
-def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progress: bool = False) -> PlanResult:
-    """Run the whole pipeline. Raises a PlannerError subclass on bad input."""
+@dataclass(frozen=True, kw_only=True)
+class MemberRef:
+    """One forecast member: a file, and the index along its member dimension (None: the file has none)."""
+
+    path: Path
+    member: int | None = None
+
+    @property
+    def label(self) -> str:
+        return f"{self.path}" if self.member is None else f"{self.path}[member {self.member}]"
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class MemberTask:
+    """What a worker needs to sample one member (docs/scale-out.md): small, picklable, no arrays of currents."""
+
+    ref: MemberRef
+    time_index: int
+    grid: Grid
+    refine: int
+    settings: PlanSettings
+    goal_mask: NDArray[np.bool_]
+    variables: tuple[str, str] | None = None
+    grid_file: Path | None = None
+
+
+def members_of(request: PlanRequest) -> list[MemberRef]:
+    """The request's forecast members: every file, and every member of a file with a member dimension."""
+    if request.members is not None:
+        return list(request.members)
+    refs: list[MemberRef] = []
+    for path in (request.forecast_path, *request.ensemble):
+        n = ensemble_size(path, variables=request.variables)
+        refs.extend([MemberRef(path=Path(path))] if n == 1 else [MemberRef(path=Path(path), member=k) for k in range(n)])
+    return refs
+
+
+def sample_member(task: MemberTask) -> SampleStats:
+    """One task: open one member (only the step and the region needed), resample it, sample its transitions."""
+    fine = fine_grid(task.grid, task.refine)
+    forecast = open_forecast(task.ref.path, variables=task.variables, grid_file=task.grid_file, member=task.ref.member,
+                             bbox=fine.bbox, time_index=task.time_index)
+    uf, vf = resample(forecast, fine, time_index=forecast.step_index(task.time_index))
+    return sample_transitions(uf, vf, task.grid, task.settings, refine=task.refine, goal_mask=task.goal_mask)
+
+
+def member_tasks(request: PlanRequest, *, first: Forecast | None = None) -> list[MemberTask]:
+    """The sampling tasks of a physical plan over the request's members (the first member sets grid and step)."""
+    refs = members_of(request)
+    if first is None:
+        index = choose_time_index(forecast_times(refs[0].path, variables=request.variables), request)
+        first = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
+                              member=refs[0].member, bbox=request.bbox, time_index=index)
+    elif first.window is not None and first.window.time_index is not None:
+        index = first.window.time_index  # a one-step window (open_forecast(time_index=)): its step
+    else:
+        index = choose_time_index(first, request)
+    grid = planning_grid(first, request)
+    check_coverage(first, grid)
+    refine = refine_factor(grid, native_spacing_deg(first))
+    u, v = resample(first, grid, time_index=first.step_index(index))
+    water = np.isfinite(u) & np.isfinite(v)
+    if not water.any():
+        raise GridError(f"{first.source}: no water on the planning grid")
+    goal_mask = goal_cells_on(grid, water, request.goal).mask
+    return [MemberTask(ref=r, time_index=index, grid=grid, refine=refine, settings=request.settings, goal_mask=goal_mask,
+                       variables=request.variables, grid_file=request.grid_file) for r in refs]
+
+
+def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progress: bool = False,
+              runner: Runner | None = None) -> PlanResult:
+    """Run the whole pipeline. Raises a PlannerError subclass on bad input.
+
+    Several forecast members (``request.ensemble``, a member dimension, ``request.members``)
+    are outcomes of the physical model: each member is sampled as a task of ``runner``
+    (default: here), and their samples together make the transitions (docs/scale-out.md).
+    """
     timings: dict[str, float] = {}
     t = time.perf_counter()
+    refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
+    if len(refs) > 1:
+        return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)
     if forecast is None:
-        forecast = open_forecast(request.forecast_path, variables=request.variables, grid_file=request.grid_file)
+        # The time axis alone first (cheap for any file size), then only that step, the member
+        # and, with a bbox, the region around it (docs/forecasts-large.md).
+        index = choose_time_index(forecast_times(refs[0].path, variables=request.variables), request)
+        forecast = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
+                                 member=refs[0].member, bbox=request.bbox, time_index=index)
+    else:
+        index = choose_time_index(forecast, request)
+    step = forecast.step_index(index)  # index into forecast.time_s: 0 for a one-step window
     timings["load_s"] = time.perf_counter() - t
     grid = planning_grid(forecast, request)
     check_coverage(forecast, grid)
-    index = choose_time_index(forecast, request)
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states")
     model: TransitionModel | PhysicalModel
     solution: Solution | PhysicalSolution
     if request.settings.model == "physical":
         t = time.perf_counter()
         refine = refine_factor(grid, native_spacing_deg(forecast))
-        uf, vf = resample(forecast, fine_grid(grid, refine), time_index=index)
+        uf, vf = resample(forecast, fine_grid(grid, refine), time_index=step)
         u, v = uf[:, ::refine, ::refine], vf[:, ::refine, ::refine]
         timings["resample_s"] = time.perf_counter() - t
         t = time.perf_counter()
@@ -151,7 +256,7 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         timings["plan_s"] = time.perf_counter() - t
     else:
         t = time.perf_counter()
-        u, v = resample(forecast, grid, time_index=index)
+        u, v = resample(forecast, grid, time_index=step)
         timings["resample_s"] = time.perf_counter() - t
         t = time.perf_counter()
         model = build_transitions(u, v, grid, request.settings)
@@ -161,12 +266,46 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         solution,
         forecast_source=forecast.source,
         forecast_identity=forecast.identity,
-        forecast_time=forecast_time_iso(forecast, index),
+        forecast_time=forecast_time_iso(forecast, step),
     )
     return PlanResult(
         forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=model,
         solution=solution, table=table, timings_s=timings,
     )
+
+
+def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runner, progress: bool) -> PlanResult:
+    if request.settings.model != "physical":
+        raise PlannerError(f"an ensemble of {len(refs)} forecast members needs the physical model (members are its "
+                           f"outcomes; the paper model has none): give --model physical or one forecast")
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    index = choose_time_index(forecast_times(refs[0].path, variables=request.variables), request)
+    first = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
+                          member=refs[0].member, bbox=request.bbox, time_index=index)
+    tasks = member_tasks(request, first=first)
+    timings["load_s"] = time.perf_counter() - t
+    timings["resample_s"] = 0.0  # in the member tasks
+    grid, index = tasks[0].grid, tasks[0].time_index
+    _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states; "
+                    f"{len(refs)} forecast members")
+    t = time.perf_counter()
+    stats = runner.map(sample_member, tasks)
+    timings["transitions_s"] = time.perf_counter() - t
+    model = assemble(combine(stats), grid, request.settings, refine=tasks[0].refine)
+    _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each "
+                    f"from {model.members} members")
+    solution = solve_physical(model, request.goal)
+    timings["plan_s"] = time.perf_counter() - t
+    identity = "ensemble:" + hashlib.sha256(
+        "|".join(f"{r.member}@{file_identity(r.path)}" for r in refs).encode()).hexdigest()[:16]
+    table = PolicyTable.from_solution(
+        solution, forecast_source=" + ".join(r.label for r in refs)[:2000], forecast_identity=identity,
+        forecast_time=forecast_time_iso(first, first.step_index(index)),
+    )
+    u, v = resample(first, grid, time_index=first.step_index(index))  # the first member's, for pictures
+    return PlanResult(forecast=first, time_index=index, grid=grid, u_m_s=u, v_m_s=v,
+                      model=model, solution=solution, table=table, timings_s=timings)
 
 
 def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:

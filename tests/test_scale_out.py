@@ -166,3 +166,100 @@ def test_chunks_cover_every_run_once_in_order(n, workers):
 
 def test_in_process_runner_passes_shared_arguments():
     assert InProcess().map(lambda x, k: x * k, [1, 2, 3], k=np.int64(2)) == [2, 4, 6]
+
+
+# --------------------------------------------------------------------------- ensembles
+
+
+@pytest.fixture(scope="module")
+def ensemble(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from planner.ensemble import write_gyre_ensemble
+
+    return write_gyre_ensemble(tmp_path_factory.mktemp("ens") / "ens.nc", GYRE, members=3, seed=1)
+
+
+def _ensemble_request(path: Path, criterion: str, members=None):
+    from planner.grid import BBox
+    from planner.plan import PlanRequest
+    from planner.settings import Goal, PlanSettings
+
+    return PlanRequest(forecast_path=path, goal=Goal(lon_deg=-117.86, lat_deg=33.385, depth_m=0.0), depths_m=(0.0,),
+                       settings=PlanSettings(model="physical", criterion=criterion),
+                       bbox=BBox(west_deg=-118.20, south_deg=33.30, east_deg=-117.80, north_deg=33.467), nx=21, ny=9,
+                       members=members)
+
+
+@pytest.mark.parametrize("criterion", ["robust", "expected"])
+def test_ensemble_plan_on_dask_equals_one_process(cluster, ensemble, criterion):
+    from planner.plan import make_plan
+
+    _c, runner = cluster
+    here = make_plan(_ensemble_request(ensemble, criterion))
+    there = make_plan(_ensemble_request(ensemble, criterion), runner=runner)
+    assert here.model.members == 3 and here.model.samples_per_action == 3 * 81
+    assert there.table.to_bytes() == here.table.to_bytes()
+    assert np.array_equal(there.solution.value_wh, here.solution.value_wh, equal_nan=True)
+    assert here.table.forecast_identity.startswith("ensemble:")
+
+
+def test_robust_over_members_is_at_least_every_members_worst_case(ensemble):
+    """Members are outcomes: the worst case over all members' samples is never cheaper than one member's."""
+    from planner.plan import MemberRef, make_plan
+
+    together = make_plan(_ensemble_request(ensemble, "robust")).solution.value_wh
+    alone = [make_plan(_ensemble_request(ensemble, "robust", (MemberRef(path=ensemble, member=k),))).solution.value_wh
+             for k in range(3)]
+    for v in alone:
+        both = np.isfinite(v) & np.isfinite(together)
+        assert np.all(together[both] >= v[both] - 1e-9)
+        assert not np.any(np.isfinite(together) & ~np.isfinite(v))  # reachable together -> reachable alone
+    assert np.any(together > np.maximum.reduce(alone) + 1e-6)  # and members do combine, not just pick one
+
+
+def test_expected_over_members_lies_between_the_members(ensemble):
+    from planner.plan import MemberRef, make_plan
+
+    together = make_plan(_ensemble_request(ensemble, "expected")).solution
+    alone = [make_plan(_ensemble_request(ensemble, "expected", (MemberRef(path=ensemble, member=k),))).solution.value_wh
+             for k in range(3)]
+    ok = np.isfinite(together.value_wh) & np.all([np.isfinite(v) for v in alone], axis=0)
+    assert ok.sum() > 100
+    lo, hi = np.minimum.reduce(alone)[ok], np.maximum.reduce(alone)[ok]
+    v = together.value_wh[ok]
+    # Not a theorem state by state (the mixed policy differs), but far from both ends it would be wrong.
+    assert np.median((v - lo) / np.maximum(hi - lo, 1e-9)) > 0.05 and np.median((hi - v) / np.maximum(hi - lo, 1e-9)) > 0.05
+
+
+def test_paper_model_refuses_an_ensemble(ensemble, tmp_path, capsys):
+    mission = tmp_path / "m.yaml"
+    mission.write_text(MISSION.format(name="p", forecast=ensemble, model="paper", criterion="robust"))
+    rc = main(["plan", str(mission), "--out", str(tmp_path / "t.lrpt"), "--scheduler", IN_PROCESS, "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "3 forecast members needs the physical model" in err and err.count("\n") == 1
+    assert not (tmp_path / "t.lrpt").exists()
+
+
+def test_plan_command_plans_an_ensemble_on_the_cluster(cluster, ensemble, files, tmp_path, capsys):
+    c, _runner = cluster
+    out = tmp_path / "ens.lrpt"
+    rc = main(["plan", str(files["physical"]), "--forecast", str(ensemble), "--out", str(out),
+               "--scheduler", c.scheduler_address, "--quiet"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    from planner.plan import make_plan
+    from planner.table import PolicyTable
+
+    mission = load_mission(files["physical"])
+    request = dataclasses.replace(_ensemble_request(ensemble, "expected"), settings=mission.settings)
+    assert PolicyTable.load(out).actions.tobytes() == make_plan(request).table.actions.tobytes()
+    assert "3 forecast members" in text or "ensemble:" in text
+
+
+def test_holdout_command_compares_ensemble_and_single_member_plans(ensemble, files, capsys):
+    rc = main(["holdout", str(files["physical"]), "--ensemble", str(ensemble), "--starts", "3", "--dt-s", "10",
+               "--max-hours", "6", "--scheduler", IN_PROCESS, "--quiet"])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    rows = [line.split() for line in out.splitlines() if line.strip() and line.split()[0].isdigit()]
+    assert [r[0] for r in rows] == ["0", "1", "2"] and all(r[1] == "3" for r in rows)
+    assert "ensemble" in out and "single-member plans" in out
