@@ -13,6 +13,8 @@ HAVE_NODE  := $(shell command -v node >/dev/null 2>&1 && command -v npm >/dev/nu
 # Where the demo vehicle starts (LON,LAT): open water 16 km west-south-west of the goal.
 DEMO_START ?= -117.96,33.34
 DEMO_SPEEDUP ?= 1000
+# Start states of the closed-loop comparison at the end of `make demo` (docs/evaluation.md uses 200).
+EVAL_STARTS ?= 40
 
 .PHONY: demo test node bench clean sysdeps
 
@@ -40,6 +42,10 @@ demo: $(STAMP)
 	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --out $(OUT)
 	$(LRAUV) replay $(OUT)/demo.mcap --report $(OUT)/report \
 	  --csv $(OUT)/dive.csv --geojson $(OUT)/dive.geojson --gpx $(OUT)/dive.gpx
+	$(LRAUV) plan missions/demo-physical.yaml --forecast $(OUT)/forecast.nc --out $(OUT)/demo-physical.lrpt \
+	  --start $(DEMO_START),0,0 --quiet
+	$(LRAUV) evaluate missions/demo-physical.yaml --forecast $(OUT)/forecast.nc --truth $(OUT)/truth.nc \
+	  --starts $(EVAL_STARTS) --out $(OUT)/evaluation
 
 # The stamp lives in node_modules: deleting node_modules, or a newer package.json or lock, reinstalls.
 # An install that fails (no registry) removes what it left, warns, and the Node tests skip.
