@@ -473,6 +473,20 @@ def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth
                 tsum[c, ch] += t
 
 
+@numba.njit(cache=True, inline="always")
+def _decode(s, L, ny, nx):  # pragma: no cover
+    """(k, cell, l, j, i) of an internal state index (heading-major, as ``PhysicalModel.state_index``)."""
+    k = s // (L * ny * nx)
+    c = s % (L * ny * nx)
+    return k, c, c // (ny * nx), (c // nx) % ny, c % nx
+
+
+@numba.njit(cache=True, inline="always")
+def _channel(a, k):  # pragma: no cover
+    """The sample channel of a move action: DRIFT 0, UP 1, DOWN 2, FORWARD 3 + heading."""
+    return 0 if a == 0 else (3 + k if a == 1 else (1 if a == 4 else 2))
+
+
 @numba.njit(cache=True)
 def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  # pragma: no cover
     """Flatten the per-cell samples into per-(state, action) outcome lists, states in index order."""
@@ -481,11 +495,7 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
     n_pairs = 0
     n_out = 0
     for s in range(n_states):  # pass 1: sizes
-        k = s // (L * ny * nx)
-        c = s % (L * ny * nx)
-        l = c // (ny * nx)
-        j = (c // nx) % ny
-        i = c % nx
+        k, c, l, j, i = _decode(s, L, ny, nx)
         if not water[l, j, i]:
             continue
         for a in range(6):
@@ -493,7 +503,7 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
                 n_pairs += 1
                 n_out += 1
                 continue
-            ch = 0 if a == 0 else (3 + k if a == 1 else (1 if a == 4 else 2))
+            ch = _channel(a, k)
             if hazard[c, ch]:
                 continue
             n_pairs += 1
@@ -512,11 +522,7 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
     e = 0
     ptr[0] = 0
     for s in range(n_states):  # pass 2: fill
-        k = s // (L * ny * nx)
-        c = s % (L * ny * nx)
-        l = c // (ny * nx)
-        j = (c // nx) % ny
-        i = c % nx
+        k, c, l, j, i = _decode(s, L, ny, nx)
         if not water[l, j, i]:
             continue
         for a in range(6):
@@ -529,7 +535,7 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
                 energy[p] = rot_wh[l, j, i]
                 duration[p] = rot_s
             else:
-                ch = 0 if a == 0 else (3 + k if a == 1 else (1 if a == 4 else 2))
+                ch = _channel(a, k)
                 if hazard[c, ch]:
                     continue
                 lt = l - 1 if a == 4 else (l + 1 if a == 5 else l)

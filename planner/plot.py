@@ -817,7 +817,6 @@ def _overlap_area(a: tuple[float, float, float, float], b: tuple[float, float, f
 def _path_summary(solution: AnySolution, start: tuple[int, int, int, int], steps: list[Any]) -> str:
     if _is_physical(solution):
         return _physical_path_summary(solution, start, steps)  # type: ignore[arg-type]
-    grid = solution.model.grid
     settings = solution.model.settings
     l, j, i, k = start
     cost, n = solution.value(l, j, i, k)
@@ -825,12 +824,7 @@ def _path_summary(solution: AnySolution, start: tuple[int, int, int, int], steps
     path_cost = sum(int(solution.model.costs[s.action]) for s in steps[:-1])
     case = "worst" if settings.criterion == "robust" else "best"
     last = steps[-1].action
-    lines = [
-        f"start  {_lonlat(grid.lon_deg[i], grid.lat_deg[j])}",
-        f"       {grid.depth_m[l]:g} m, heading {Direction(k).name}",
-        f"goal   {_lonlat(grid.lon_deg[solution.goal_cells.i], grid.lat_deg[solution.goal_cells.j])}",
-        f"       {grid.depth_m[solution.goal_cells.l]:g} m, radius {solution.goal.radius_cells} cell(s)",
-        "",
+    lines = _start_and_goal(solution, start) + [
         f"plan ({settings.criterion}, {settings.uncertainty})",
         f"predicted from start ({case} case):" if math.isfinite(cost) else "start cannot reach the goal",
     ]
@@ -838,9 +832,7 @@ def _path_summary(solution: AnySolution, start: tuple[int, int, int, int], steps
         lines.append(f"  cost {cost:g}, {n} steps")
     lines.append("nominal path:")
     lines.append(f"  cost {path_cost}, {len(steps) - 1} actions")
-    for a in Action:
-        if counts[a]:
-            lines.append(f"  {_action_label(a):<13}{counts[a]:>4}")
+    lines += _action_counts(counts)
     if last != Action.AT_GOAL and math.isfinite(cost):
         lines.append("ends before the goal: the plan")
         lines.append("counts on a better outcome")
@@ -850,7 +842,6 @@ def _path_summary(solution: AnySolution, start: tuple[int, int, int, int], steps
 def _physical_path_summary(solution: PhysicalSolution, start: tuple[int, int, int, int],
                            steps: list[PhysicalStep]) -> str:
     """The side text of the nominal path picture for a physical plan: costs in Wh, times in hours."""
-    grid = solution.model.grid
     settings = solution.model.settings
     l, j, i, k = start
     cost = float(solution.value_wh[l, j, i, k])
@@ -859,12 +850,7 @@ def _physical_path_summary(solution: PhysicalSolution, start: tuple[int, int, in
     path_h = sum(s.duration_s for s in steps[:-1]) / 3600.0
     case = "worst" if settings.criterion == "robust" else "expected"
     last = steps[-1].action
-    lines = [
-        f"start  {_lonlat(grid.lon_deg[i], grid.lat_deg[j])}",
-        f"       {grid.depth_m[l]:g} m, heading {Direction(k).name}",
-        f"goal   {_lonlat(grid.lon_deg[solution.goal_cells.i], grid.lat_deg[solution.goal_cells.j])}",
-        f"       {grid.depth_m[solution.goal_cells.l]:g} m, radius {solution.goal.radius_cells} cell(s)",
-        "",
+    lines = _start_and_goal(solution, start) + [
         f"plan (physical, {settings.criterion})",
         f"predicted from start ({case} case):" if math.isfinite(cost) else "start cannot reach the goal",
     ]
@@ -872,9 +858,7 @@ def _physical_path_summary(solution: PhysicalSolution, start: tuple[int, int, in
         lines.append(f"  {cost:.1f} Wh, {hours:.2f} h to go")
     lines.append("nominal path (most likely):")
     lines.append(f"  {len(steps) - 1} actions, {path_h:.2f} h (mean)")
-    for a in Action:
-        if counts[a]:
-            lines.append(f"  {_action_label(a):<13}{counts[a]:>4}")
+    lines += _action_counts(counts)
     if last != Action.AT_GOAL and math.isfinite(cost):
         lines.append("ends before the goal: the most")
         lines.append("likely outcome repeats a state")
@@ -883,3 +867,21 @@ def _physical_path_summary(solution: PhysicalSolution, start: tuple[int, int, in
 
 def _lonlat(lon: float, lat: float) -> str:
     return f"{abs(lon):.4f}\u00b0{'E' if lon >= 0 else 'W'} {abs(lat):.4f}\u00b0{'N' if lat >= 0 else 'S'}"
+
+
+def _start_and_goal(solution: Any, start: tuple[int, int, int, int]) -> list[str]:
+    """The first lines of a nominal path's side text: where it starts and where the goal is."""
+    grid = solution.model.grid
+    l, j, i, k = start
+    gc = solution.goal_cells
+    return [
+        f"start  {_lonlat(grid.lon_deg[i], grid.lat_deg[j])}",
+        f"       {grid.depth_m[l]:g} m, heading {Direction(k).name}",
+        f"goal   {_lonlat(grid.lon_deg[gc.i], grid.lat_deg[gc.j])}",
+        f"       {grid.depth_m[gc.l]:g} m, radius {solution.goal.radius_cells} cell(s)",
+        "",
+    ]
+
+
+def _action_counts(counts: Counter[Action]) -> list[str]:
+    return [f"  {_action_label(a):<13}{counts[a]:>4}" for a in Action if counts[a]]
