@@ -26,6 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from distributed import Client, LocalCluster  # noqa: E402
 
+from planner.cluster import local_cluster  # noqa: E402
+
 from planner.campaign import CampaignSpec, prepare, run_all  # noqa: E402
 from planner.cluster import DaskRunner, InProcess  # noqa: E402
 from planner.double_gyre import DoubleGyreSettings, write_gyre  # noqa: E402
@@ -40,8 +42,7 @@ def _nothing(x: int) -> int:
 
 
 def _cluster(n: int) -> tuple[LocalCluster, Client]:
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                           scheduler_port=0, silence_logs=40)
+    cluster = local_cluster(n)
     return cluster, Client(cluster, set_as_default=False)
 
 
@@ -122,6 +123,8 @@ def _ensemble(args: argparse.Namespace, d: Path) -> None:
         cluster, client = _cluster(workers)
         with cluster, client:
             runner = DaskRunner(client, what=f"{workers} workers")
+            threads = sorted(client.run(lambda: __import__("numba").get_num_threads()).values())
+            print(f"  numba threads per worker: {threads}")
             runner.map(sample_member, tasks)
             s = best(lambda: runner.map(sample_member, tasks), args.repeat)
             print(f"ensemble sampling, {workers} worker(s): {len(tasks)} members in {s:.2f} s ({here_s / s:.2f}x)")

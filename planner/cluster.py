@@ -78,7 +78,7 @@ def open_runner(scheduler: str | None = None, *, workers: int | None = None) -> 
         yield InProcess()
         return
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
     except ImportError as exc:  # pragma: no cover - dask is a dependency
         raise PlannerError(f"--scheduler: Dask's distributed package is not installed ({exc}); use --scheduler {IN_PROCESS}") from None
     if scheduler is not None:
@@ -93,9 +93,22 @@ def open_runner(scheduler: str | None = None, *, workers: int | None = None) -> 
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise PlannerError(f"--workers: expected at least 1; got {n}")
-    with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", scheduler_port=0,
-                      silence_logs=40) as cluster, Client(cluster, set_as_default=False) as client:
+    with local_cluster(n) as cluster, Client(cluster, set_as_default=False) as client:
         yield DaskRunner(client, what="local Dask cluster")
+
+
+def local_cluster(n_workers: int) -> Any:
+    """A ``distributed.LocalCluster`` of single-threaded worker processes on 127.0.0.1.
+
+    One thread per worker, numba's parallel loops included (set in the environment each worker
+    process starts with, before it imports numba): n workers use n cores, not n x cores.
+    """
+    import dask
+    from distributed import LocalCluster
+
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": {"NUMBA_NUM_THREADS": "1"}}):
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                            scheduler_port=0, silence_logs=40)
 
 
 def chunks(n: int, workers: int, *, per_worker: int = 4) -> list[range]:
