@@ -123,8 +123,6 @@ def _ensemble(args: argparse.Namespace, d: Path) -> None:
         cluster, client = _cluster(workers)
         with cluster, client:
             runner = DaskRunner(client, what=f"{workers} workers")
-            threads = sorted(client.run(lambda: __import__("numba").get_num_threads()).values())
-            print(f"  numba threads per worker: {threads}")
             runner.map(sample_member, tasks)
             s = best(lambda: runner.map(sample_member, tasks), args.repeat)
             print(f"ensemble sampling, {workers} worker(s): {len(tasks)} members in {s:.2f} s ({here_s / s:.2f}x)")

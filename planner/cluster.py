@@ -64,7 +64,7 @@ class DaskRunner:
         if not items:
             return []
         sent = {k: self.client.scatter(v, broadcast=True, hash=False) for k, v in shared.items()}
-        futures = self.client.map(fn, list(items), pure=False, **sent)
+        futures = self.client.map(_on_one_thread, list(items), pure=False, task_function=fn, **sent)
         return list(self.client.gather(futures))
 
     def describe(self) -> str:
@@ -98,17 +98,20 @@ def open_runner(scheduler: str | None = None, *, workers: int | None = None) -> 
 
 
 def local_cluster(n_workers: int) -> Any:
-    """A ``distributed.LocalCluster`` of single-threaded worker processes on 127.0.0.1.
-
-    One thread per worker, numba's parallel loops included (set in the environment each worker
-    process starts with, before it imports numba): n workers use n cores, not n x cores.
-    """
-    import dask
+    """A ``distributed.LocalCluster`` of single-threaded worker processes on 127.0.0.1."""
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": {"NUMBA_NUM_THREADS": "1"}}):
-        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                            scheduler_port=0, silence_logs=40)
+    return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                        scheduler_port=0, silence_logs=40)
+
+
+def _on_one_thread(item: Any, *, task_function: Callable[..., R], **shared: Any) -> R:
+    """Run a task with numba's parallel loops on one thread: a worker is one core's worth of work,
+    so n workers use n cores, not n x cores (numba's setting is per calling thread)."""
+    import numba
+
+    numba.set_num_threads(1)
+    return task_function(item, **shared)
 
 
 def chunks(n: int, workers: int, *, per_worker: int = 4) -> list[range]:
