@@ -368,7 +368,8 @@ def _model_lines(result) -> list[str]:  # type: ignore[no-untyped-def]
              f" at {v.cruise_speed_m_s:g} m/s, buoyancy {v.buoyancy_w:g} W)",
              f"samples    {m.n_pairs:,} state-actions, {m.samples_per_action} samples per action"
              f" ({s.physical.start_points}x{s.physical.start_points} start points x {s.physical.error_members + 1}"
-             f" currents), currents {m.refine}x finer than the grid"]
+             f" currents{f' x {m.members} forecast members' if m.members > 1 else ''}),"
+             f" currents {m.refine}x finer than the grid"]
     if s.criterion == "expected":
         lines.append(f"solve      policy iteration: {sol.iterations} iterations, residual {sol.residual_wh:.2g} Wh")
     return lines
