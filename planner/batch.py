@@ -120,13 +120,8 @@ def collect(files: list[Path], out_dir: Path, forecast: Path | None) -> list[Bat
     for vehicle, path in vehicles:
         mission = load_mission(path)
         fc = forecast or _mission_forecast(mission, out_dir=out_dir)
-        for g, goal in enumerate(mission.goals):
-            request = PlanRequest(
-                forecast_path=fc, goal=goal.goal, depths_m=mission.region.depths_m, settings=mission.settings,
-                bbox=mission.region.bbox, nx=mission.region.nx, ny=mission.region.ny,
-                time_index=mission.forecast.time_index, time_iso=mission.forecast.time_iso,
-                variables=mission.forecast.variables, grid_file=mission.forecast.grid_file,
-            )
+        for g in range(len(mission.goals)):
+            request = PlanRequest.for_mission(mission, fc, goal_index=g)
             items.append(BatchItem(vehicle=vehicle, goal_index=g, request=request,
                                    out=out_dir / vehicle / f"goal-{g}.lrpt"))
     return items

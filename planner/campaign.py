@@ -15,6 +15,7 @@ import time
 from bisect import bisect_right
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,6 @@ from planner.evaluate import (
     FeedbackPilot,
     NaivePilot,
     OpenLoopPilot,
-    OpenLoopStep,
     Referee,
     RunResult,
     Start,
@@ -88,8 +88,13 @@ class MethodPlan:
     schedule: tuple[tuple[float, PolicyTable], ...]
     first: PlanResult | None  # the plan at the start (None for naive)
 
+    @cached_property
+    def _starts_s(self) -> tuple[float, ...]:
+        return tuple(t for t, _ in self.schedule)
+
     def table_at(self, t_s: float) -> PolicyTable:
-        n = bisect_right([t for t, _ in self.schedule], t_s) - 1
+        """The table in use at vehicle time ``t_s`` (looked up every physics step)."""
+        n = bisect_right(self._starts_s, t_s) - 1
         return self.schedule[max(n, 0)][1]
 
 
@@ -114,18 +119,16 @@ def settings_for(method: str, base: PlanSettings) -> PlanSettings:
 
 
 def request_for(spec: CampaignSpec, settings: PlanSettings, time_index: int) -> PlanRequest:
-    m = spec.mission
-    goal = m.goals[0].goal
-    nx, ny, radius = m.region.nx, m.region.ny, goal.radius_cells
-    if spec.grid_scale != 1:
-        if nx is None or ny is None:
-            raise PlannerError("a finer grid needs the mission's region.nx and region.ny")
-        s = spec.grid_scale
-        nx, ny, radius = (nx - 1) * s + 1, (ny - 1) * s + 1, radius * s
-        goal = Goal(lon_deg=goal.lon_deg, lat_deg=goal.lat_deg, depth_m=goal.depth_m, radius_cells=radius)
-    return PlanRequest(forecast_path=spec.forecast_path, goal=goal, depths_m=m.region.depths_m, settings=settings,
-                       bbox=m.region.bbox, nx=nx, ny=ny, time_index=time_index,
-                       variables=m.forecast.variables, grid_file=m.forecast.grid_file)
+    request = replace(PlanRequest.for_mission(spec.mission, spec.forecast_path), settings=settings,
+                      time_index=time_index, time_iso=None)
+    if spec.grid_scale == 1:
+        return request
+    if request.nx is None or request.ny is None:
+        raise PlannerError("a finer grid needs the mission's region.nx and region.ny")
+    s, goal = spec.grid_scale, request.goal
+    return replace(request, nx=(request.nx - 1) * s + 1, ny=(request.ny - 1) * s + 1,
+                   goal=Goal(lon_deg=goal.lon_deg, lat_deg=goal.lat_deg, depth_m=goal.depth_m,
+                             radius_cells=goal.radius_cells * s))
 
 
 def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], None] = lambda _: None) -> dict[str, MethodPlan]:
@@ -222,8 +225,7 @@ def run_one(campaign: Campaign, method: str, index: int) -> RunResult:
                              predicted_wh=predicted, marked_reachable=False)
         if method == "open-loop":
             assert isinstance(sol, PhysicalSolution) and state is not None
-            steps = [OpenLoopStep(action=s.action, l=s.l, j=s.j, k=s.k, duration_s=s.duration_s)
-                     for s in sol.nominal(state) if s.action not in (Action.AT_GOAL, Action.UNREACHABLE)]
+            steps = [s for s in sol.nominal(state) if s.action not in (Action.AT_GOAL, Action.UNREACHABLE)]
             pilot = OpenLoopPilot(steps, table, params)
         else:
             pilot = FeedbackPilot(plan.table_at, params)

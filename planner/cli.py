@@ -306,12 +306,14 @@ def _plan(args: argparse.Namespace) -> int:
         print(f"planning on {forecast_path} ({how})", file=sys.stderr)
     from planner.plan import members_of
 
-    if len(members_of(request)) > 1:
+    refs = members_of(request)  # the file headers are read once, here
+    request = replace(request, members=tuple(refs))
+    if len(refs) > 1:
         from planner.cluster import open_runner
 
         with open_runner(args.scheduler, workers=args.workers) as runner:
             if progress:
-                print(f"  {len(members_of(request))} forecast members, sampled: {runner.describe()}", file=sys.stderr)
+                print(f"  {len(refs)} forecast members, sampled: {runner.describe()}", file=sys.stderr)
             result = make_plan(request, progress=progress, runner=runner)
     else:
         result = make_plan(request, progress=progress)

@@ -24,26 +24,27 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, get_args
+from typing import TYPE_CHECKING, Literal, Protocol, get_args
 
 import numpy as np
 from numpy.typing import NDArray
 
 from planner.actions import Action
 from planner.table import PolicyTable
-from vehicle_sim.dynamics import Body, Setpoint, SetpointKind, VehicleParams, step
+from vehicle_sim.dynamics import M_PER_DEG_LAT, Body, Setpoint, SetpointKind, VehicleParams, step
+
+if TYPE_CHECKING:  # the parser imports this module: no scipy or numba at import time
+    from planner.physical_solve import PhysicalStep
 
 Method = Literal["paper", "physical-robust", "physical-expected", "open-loop", "naive"]
 METHODS: tuple[str, ...] = get_args(Method)
-FEEDBACK_METHODS = ("paper", "physical-robust", "physical-expected")
 Outcome = Literal["arrived", "stranded", "left_region", "timed_out", "gave_up", "refused"]
 OUTCOMES: tuple[str, ...] = get_args(Outcome)
 _HEADING_TOLERANCE_DEG = 3.0  # executive.helm: a rotation is complete within this of its bearing
 _DEPTH_TOLERANCE_M = 0.5  # executive.helm.HelmConfig.depth_tolerance_m
-M_PER_DEG = 6_371_000.0 * math.pi / 180.0  # spec section 1 (flat earth)
 
 
-class Truth:  # pragma: no cover - typing only
+class Truth(Protocol):
     """What a truth field offers (``vehicle_sim.world.World`` / ``TruthSequence``)."""
 
     def current_at(self, t_s: float, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[float, float]: ...
@@ -69,17 +70,6 @@ class RunResult:
     energy_wh: float
     predicted_wh: float
     marked_reachable: bool
-
-
-@dataclass(frozen=True, slots=True)
-class OpenLoopStep:
-    """One action of a nominal sequence: in state (l, j, ., k), for ``duration_s``."""
-
-    action: Action
-    l: int
-    j: int
-    k: int
-    duration_s: float
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -166,7 +156,7 @@ def realise(action: Action, state: tuple[int, int, int, int], table: PolicyTable
 class OpenLoopPilot:
     """A fixed action sequence, each action for its duration, whatever happens."""
 
-    def __init__(self, steps: Sequence[OpenLoopStep], table: PolicyTable, params: VehicleParams) -> None:
+    def __init__(self, steps: Sequence[PhysicalStep], table: PolicyTable, params: VehicleParams) -> None:
         self._steps = list(steps)
         self._table = table
         self._params = params
@@ -195,8 +185,8 @@ class NaivePilot:
 
     def command(self, body: Body) -> Setpoint | str:
         lon, lat, depth = self._goal
-        north = (lat - body.lat_deg) * M_PER_DEG
-        east = (lon - body.lon_deg) * M_PER_DEG * math.cos(math.radians(body.lat_deg))
+        north = (lat - body.lat_deg) * M_PER_DEG_LAT
+        east = (lon - body.lon_deg) * M_PER_DEG_LAT * math.cos(math.radians(body.lat_deg))
         dist = math.hypot(north, east) or 1.0
         yaw = math.degrees(math.atan2(east, north)) % 360.0
         return Setpoint(kind=SetpointKind.VELOCITY, north_m_s=self._speed * north / dist,

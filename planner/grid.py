@@ -128,6 +128,16 @@ class Grid:
         outside = max(0.0, -fi, fi - (self.nx - 1), -fj, fj - (self.ny - 1))
         return i, j, float(outside)
 
+    def state_index(self, l: int, j: int, i: int, k: int) -> int:
+        """Internal state index of the solvers: heading-major, ``((k * L + l) * ny + j) * nx + i``,
+        so that the moves of one heading stay in one contiguous slab."""
+        return ((k * self.n_layers + l) * self.ny + j) * self.nx + i
+
+    def state_of(self, index: int) -> tuple[int, int, int, int]:
+        """``(l, j, i, k)`` of an internal state index."""
+        k, l, j, i = np.unravel_index(index, (N_HEADINGS, self.n_layers, self.ny, self.nx))
+        return (int(l), int(j), int(i), int(k))
+
     def nearest_layer(self, depth_m: float) -> int:
         """Nearest layer; at an exact midpoint the lower index (spec section 6)."""
         d = np.abs(self.depth_m - depth_m)

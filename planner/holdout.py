@@ -67,10 +67,8 @@ def holdout(mission_path: Path, ensemble: Path, *, starts: int, seed: int, dt_s:
     n = ensemble_size(ensemble)
     if n < 3:
         raise PlannerError(f"{ensemble}: {n} member(s); a hold-out comparison needs at least 3 (one truth, two to plan on)")
-    goal = mission.goals[0].goal
-    base = PlanRequest(forecast_path=ensemble, goal=goal, depths_m=mission.region.depths_m, settings=mission.settings,
-                       bbox=mission.region.bbox, nx=mission.region.nx, ny=mission.region.ny,
-                       time_index=mission.forecast.time_index or 0)
+    base = replace(PlanRequest.for_mission(mission, ensemble), time_index=mission.forecast.time_index or 0,
+                   time_iso=None, variables=None, grid_file=None)
     plans_by_member = {j: make_plan(replace(base, members=(MemberRef(path=ensemble, member=j),))) for j in range(n)}
     rows = []
     for k in (range(n) if held_out is None else held_out):

@@ -84,14 +84,12 @@ class PhysicalModel:
         return int(self.pair_state.size)
 
     def state_index(self, l: int, j: int, i: int, k: int) -> int:
-        L, ny, nx, _ = self.grid.shape
-        return ((k * L + l) * ny + j) * nx + i
+        """Internal state index (``Grid.state_index``)."""
+        return self.grid.state_index(l, j, i, k)
 
     def state_of(self, index: int) -> tuple[int, int, int, int]:
         """``(l, j, i, k)`` of an internal state index."""
-        L, ny, nx, _ = self.grid.shape
-        k, l, j, i = np.unravel_index(index, (N_HEADINGS, L, ny, nx))
-        return (int(l), int(j), int(i), int(k))
+        return self.grid.state_of(index)
 
     def pairs_of(self, l: int, j: int, i: int, k: int) -> range:
         """Pair indices of one state (pairs are sorted by state)."""

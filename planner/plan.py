@@ -9,6 +9,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +44,9 @@ from planner.physical import (
 )
 from planner.physical_solve import PhysicalSolution, solve_physical
 
+if TYPE_CHECKING:
+    from planner.mission import Mission
+
 
 @dataclass(frozen=True, kw_only=True)
 class PlanRequest:
@@ -61,6 +65,15 @@ class PlanRequest:
     grid_file: Path | None = None
     ensemble: tuple[Path, ...] = ()  # further forecast files: members of an ensemble (physical model)
     members: tuple[MemberRef, ...] | None = None  # explicit members, instead of every member of the files
+
+    @classmethod
+    def for_mission(cls, mission: Mission, forecast_path: Path, *, goal_index: int = 0) -> PlanRequest:
+        """One goal of a mission: its region, settings, forecast step and variables (no flag overrides)."""
+        m = mission
+        return cls(forecast_path=forecast_path, goal=m.goals[goal_index].goal, depths_m=m.region.depths_m,
+                   settings=m.settings, bbox=m.region.bbox, nx=m.region.nx, ny=m.region.ny,
+                   time_index=m.forecast.time_index, time_iso=m.forecast.time_iso,
+                   variables=m.forecast.variables, grid_file=m.forecast.grid_file)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -201,12 +214,17 @@ def member_tasks(request: PlanRequest, *, first: Forecast | None = None) -> list
     check_coverage(first, grid)
     refine = refine_factor(grid, native_spacing_deg(first))
     u, v = resample(first, grid, time_index=first.step_index(index))
-    water = np.isfinite(u) & np.isfinite(v)
-    if not water.any():
-        raise GridError(f"{first.source}: no water on the planning grid")
-    goal_mask = goal_cells_on(grid, water, request.goal).mask
+    goal_mask = _goal_mask(grid, u, v, request.goal, first.source)
     return [MemberTask(ref=r, time_index=index, grid=grid, refine=refine, settings=request.settings, goal_mask=goal_mask,
                        variables=request.variables, grid_file=request.grid_file) for r in refs]
+
+
+def _goal_mask(grid: Grid, u: NDArray[np.float64], v: NDArray[np.float64], goal: Goal, source: str) -> NDArray[np.bool_]:
+    """The goal cells on the planning grid's water (the physical model ends samples on entering them)."""
+    water = np.isfinite(u) & np.isfinite(v)
+    if not water.any():
+        raise GridError(f"{source}: no water on the planning grid")
+    return goal_cells_on(grid, water, goal).mask
 
 
 def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progress: bool = False,
@@ -244,10 +262,7 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         u, v = uf[:, ::refine, ::refine], vf[:, ::refine, ::refine]
         timings["resample_s"] = time.perf_counter() - t
         t = time.perf_counter()
-        water = np.isfinite(u) & np.isfinite(v)
-        if not water.any():
-            raise GridError(f"{forecast.source}: no water on the planning grid")
-        goal_mask = goal_cells_on(grid, water, request.goal).mask
+        goal_mask = _goal_mask(grid, u, v, request.goal, forecast.source)
         model = build_physical(uf, vf, grid, request.settings, refine=refine, goal_mask=goal_mask)
         timings["transitions_s"] = time.perf_counter() - t
         _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each, "
@@ -297,8 +312,12 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
                     f"from {model.members} members")
     solution = solve_physical(model, request.goal)
     timings["plan_s"] = time.perf_counter() - t
+    files = {refs[0].path: first.identity}  # each file hashed once, however many members it holds
+    for r in refs:
+        if r.path not in files:
+            files[r.path] = file_identity(r.path)
     identity = "ensemble:" + hashlib.sha256(
-        "|".join(f"{r.member}@{file_identity(r.path)}" for r in refs).encode()).hexdigest()[:16]
+        "|".join(f"{r.member}@{files[r.path]}" for r in refs).encode()).hexdigest()[:16]
     table = PolicyTable.from_solution(
         solution, forecast_source=" + ".join(r.label for r in refs)[:2000], forecast_identity=identity,
         forecast_time=forecast_time_iso(first, first.step_index(index)),

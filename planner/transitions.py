@@ -119,15 +119,12 @@ class TransitionModel:
         return [self.state_of(int(out[m])) for m in range(n)]
 
     def state_index(self, l: int, j: int, i: int, k: int) -> int:
-        """Internal state index: heading-major, ``((k * L + l) * ny + j) * nx + i``."""
-        L, ny, nx, _ = self.grid.shape
-        return ((k * L + l) * ny + j) * nx + i
+        """Internal state index (``Grid.state_index``)."""
+        return self.grid.state_index(l, j, i, k)
 
     def state_of(self, index: int) -> tuple[int, int, int, int]:
         """``(l, j, i, k)`` of an internal state index."""
-        L, ny, nx, _ = self.grid.shape
-        k, l, j, i = np.unravel_index(index, (N_HEADINGS, L, ny, nx))
-        return (int(l), int(j), int(i), int(k))
+        return self.grid.state_of(index)
 
 
 def build_transitions(

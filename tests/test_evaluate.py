@@ -23,7 +23,6 @@ from planner.cli import main
 from planner.double_gyre import DoubleGyreSettings, write_gyre
 from planner.errors import PlannerError
 from planner.evaluate import (
-    M_PER_DEG,
     METHODS,
     OUTCOMES,
     NaivePilot,
@@ -38,7 +37,7 @@ from planner.forecast import open_forecast
 from planner.mission import load_mission
 from planner.physical_solve import PhysicalSolution
 from planner.plan import make_plan
-from vehicle_sim.dynamics import Setpoint, SetpointKind, VehicleParams, power_draw_w
+from vehicle_sim.dynamics import M_PER_DEG_LAT, Setpoint, SetpointKind, VehicleParams, power_draw_w
 from vehicle_sim.world import World
 
 REPO = Path(__file__).resolve().parents[1]
@@ -177,7 +176,7 @@ class _Drift:
 
 
 def _east_m(lon_a: float, lon_b: float, lat: float) -> float:
-    return (lon_b - lon_a) * M_PER_DEG * math.cos(math.radians(lat))
+    return (lon_b - lon_a) * M_PER_DEG_LAT * math.cos(math.radians(lat))
 
 
 def test_drift_moves_with_the_current_and_spends_hotel_power_only(table):
@@ -213,7 +212,7 @@ def _body_at(lat: float, lon: float):
 
 def _naive_start(table, distance_m: float) -> Start:
     lat = table.goal_lat_deg
-    lon = table.goal_lon_deg - distance_m / (M_PER_DEG * math.cos(math.radians(lat)))
+    lon = table.goal_lon_deg - distance_m / (M_PER_DEG_LAT * math.cos(math.radians(lat)))
     return Start(lon_deg=lon, lat_deg=lat, depth_m=0.0, heading_deg=90.0)
 
 
@@ -234,9 +233,9 @@ def test_naive_fails_in_a_cross_current_faster_than_the_vehicle_and_arrives_in_s
     # The run ends where the line east first enters a goal cell (the goal radius is a cell).
     step_m = 1.0
     d = 0.0
-    while referee.judge(_body_at(start.lat_deg, start.lon_deg + d / (M_PER_DEG * math.cos(math.radians(start.lat_deg))))) is None:
+    while referee.judge(_body_at(start.lat_deg, start.lon_deg + d / (M_PER_DEG_LAT * math.cos(math.radians(start.lat_deg))))) is None:
         d += step_m
-    cell_m = table.dlon_deg * M_PER_DEG * math.cos(math.radians(start.lat_deg))
+    cell_m = table.dlon_deg * M_PER_DEG_LAT * math.cos(math.radians(start.lat_deg))
     assert 10_000.0 - (table.goal_radius_cells + 1) * cell_m < d < 10_000.0
     # Straight east at 1 m/s, after a 5 s acceleration (0.2 m/s^2): about distance / speed.
     assert t == pytest.approx(d / params.cruise_speed_m_s, abs=2 * 2.0 + 3.0)
