@@ -43,7 +43,7 @@ from executive.state import (
 from executive.geofence import inside
 from planner.actions import Action
 from planner.settings import BreachAction, OnArrival
-from planner.table import Lookup, PolicyTable
+from planner.table import CELL_MARGIN, PolicyTable
 
 # The mode for each on_breach action (ArduSub: SURFACE ascends, ALT_HOLD holds depth without
 # horizontal thrust, GUIDED holds a position).
@@ -81,7 +81,7 @@ class HelmConfig:
     depth_tolerance_m: float = 0.5
     # A cell is left only once the vehicle is this fraction of a cell beyond its edge, so that
     # noise and the current cannot make the decision chatter on a boundary.
-    cell_margin: float = 0.1
+    cell_margin: float = CELL_MARGIN
     max_mission_time_s: float | None = None
     min_battery_pct: float | None = None
     max_depth_m: float | None = None
@@ -336,8 +336,8 @@ def _choose(
     if table is None:
         new = Activity(situation=Situation.NO_TABLE, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
         return _switch(helm, current, new, out, "no valid policy table: surfacing")
-    look = table.lookup(lat, lon, depth, heading)
-    look = _sticky(look, current, table, lat, lon, heading, config.cell_margin)
+    held = current.cell[1:3] if current is not None and current.cell is not None else None
+    look = table.lookup_held(lat, lon, depth, heading, held, config.cell_margin)  # type: ignore[arg-type]
     if current is not None and current.completes and look.reason in ("ok", "unreachable"):
         if not _complete(current, vehicle, config.depth_tolerance_m):
             if current.timeout_s is None or now_s - current.started_s <= current.timeout_s:
@@ -362,23 +362,6 @@ def _choose(
     assert look.state is not None
     new = _action_activity(look.action, look.state, table, config, now_s)
     return _switch(helm, current, new, out, None)
-
-
-def _sticky(look: Lookup, current: Activity | None, table: PolicyTable, lat: float, lon: float, heading: float,
-            margin: float) -> Lookup:
-    """Keep the current water cell while the vehicle is within ``margin`` of it (hysteresis).
-
-    Arrival and leaving the grid are never delayed; the layer and heading are always the
-    measured ones.
-    """
-    if (margin <= 0.0 or current is None or current.cell is None or look.state is None
-            or look.reason not in ("ok", "unreachable", "land")):
-        return look
-    l, j, i, _k = look.state
-    _, cj, ci, _ = current.cell
-    if (j, i) == (cj, ci) or not table.near_cell(lat, lon, cj, ci, margin) or not table.water[l, cj, ci]:
-        return look
-    return table.lookup_cell((l, cj, ci), heading)
 
 
 def _switch(helm: HelmState, current: Activity | None, new: Activity, out: _Out, text: str | None) -> tuple[HelmState, bool]:

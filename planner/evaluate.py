@@ -8,15 +8,17 @@ truth file, from the same start states for every method:
   every step as the executive does (``executive.helm``'s action mapping: FORWARD a through-water
   velocity at cruise speed along the cell's bearing; DRIFT no thrust at the layer's depth;
   UP/DOWN no thrust while the depth target is reached; ROTATE turns while holding position,
-  as ArduSub's GUIDED mode does with a zero velocity target), ROTATE and UP/DOWN held until done;
+  as ArduSub's GUIDED mode does with a zero velocity target), ROTATE and UP/DOWN held until done,
+  a cell left only 10 % of a spacing past its edge, drifting at the layer's depth where the plan
+  has no action (surfacing over a cell it counts as land) until it has one again;
 - ``open-loop``: the physical expected plan's nominal action sequence from the start (each
   action for its mean predicted duration), replayed without looking at the position;
 - ``naive``: point at the goal and drive at cruise speed, gliding to the goal's depth.
 
 The vehicle's true state is used (no sensor noise), so differences come from the plans and the
 forecast's error alone. A run ends when the vehicle reaches the goal cells (the same cells for
-every method), touches land, leaves the planning region, runs out of time, or its plan has no
-action for where it is.
+every method), touches land, leaves the planning region, runs out of time, or (open loop) its
+sequence ends.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.actions import Action
-from planner.table import PolicyTable
+from planner.table import CELL_MARGIN, PolicyTable
 from vehicle_sim.dynamics import M_PER_DEG_LAT, Body, Setpoint, SetpointKind, VehicleParams, step
 
 if TYPE_CHECKING:  # the parser imports this module: no scipy or numba at import time
@@ -95,13 +97,20 @@ class Referee:
 
 
 class FeedbackPilot:
-    """The table's action for the current state, as the executive realises it."""
+    """The table's action for the current state, as the executive realises it.
 
-    def __init__(self, table_at: Callable[[float], PolicyTable], params: VehicleParams) -> None:
+    Like ``executive.helm``: an action is held until the state changes, turns and glides until
+    done, and a cell counts as left only ``cell_margin`` of a spacing beyond its edge.
+    """
+
+    def __init__(self, table_at: Callable[[float], PolicyTable], params: VehicleParams,
+                 cell_margin: float = CELL_MARGIN) -> None:
         self._table_at = table_at
         self._params = params
+        self._margin = cell_margin
         self._held: tuple[Setpoint, Callable[[Body], bool]] | None = None
         self._state: tuple[int, int, int, int] | None = None
+        self._cell: tuple[int, int] | None = None  # (j, i) of the last decision, for the hysteresis
         self._setpoint: Setpoint | None = None
         self._table: PolicyTable | None = None
 
@@ -115,14 +124,19 @@ class FeedbackPilot:
         table = self._table_at(body.time_s)
         if table is not self._table:  # a new plan: decide afresh
             self._table, self._state = table, None
-        look = table.lookup(body.lat_deg, body.lon_deg, body.depth_m, body.heading_deg)
+        look = table.lookup_held(body.lat_deg, body.lon_deg, body.depth_m, body.heading_deg, self._cell, self._margin)
         if look.reason == "at_goal":
             return "arrived"
-        if look.reason != "ok" or look.state is None:
+        if look.state is None:  # outside the grid (the referee ends such runs first)
             return "gave_up"
         if look.state == self._state and self._setpoint is not None:
             return self._setpoint
-        self._state = look.state
+        self._state, self._cell = look.state, look.state[1:3]
+        if look.reason != "ok":  # executive.helm: drift at the layer's depth where no action reaches the goal,
+            # surface over a cell the plan counts as land; the plan resumes wherever it has an action again
+            depth = table.depth_m[look.state[0]] if look.reason == "unreachable" else 0.0
+            self._setpoint = Setpoint(kind=SetpointKind.DEPTH, depth_m=depth)
+            return self._setpoint
         sp, done = realise(look.action, look.state, table, body, self._params)
         self._setpoint = sp
         if done is not None:

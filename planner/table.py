@@ -34,6 +34,9 @@ _PREAMBLE = struct.Struct("<8sHHI")  # magic, version, flags, header length
 _PAYLOAD = struct.Struct("<II")  # stored payload length, raw payload length
 _CRC = struct.Struct("<I")
 MAX_STATES = 1 << 31
+# A cell is left only once the vehicle is this fraction of a spacing beyond its edge
+# (docs/executive.md): the executive's default, and the evaluation's (docs/evaluation.md).
+CELL_MARGIN = 0.1
 
 LookupReason = Literal["ok", "at_goal", "unreachable", "outside_grid", "land"]
 # The vehicle figures a physical plan depends on (``VehicleParams``' other fields are the simulator's alone).
@@ -217,6 +220,23 @@ class PolicyTable:
         reach = 0.5 + margin_cells
         return (abs((lon_deg - self.lon0_deg) / self.dlon_deg - i) <= reach
                 and abs((lat_deg - self.lat0_deg) / self.dlat_deg - j) <= reach)
+
+    def lookup_held(self, lat_deg: float, lon_deg: float, depth_m: float, heading_deg: float,
+                    held: tuple[int, int] | None, margin_cells: float = CELL_MARGIN) -> Lookup:
+        """``lookup`` with hysteresis: keep water cell ``held = (j, i)`` while within ``margin_cells`` of it.
+
+        Without it a vehicle on a boundary, pushed back by the current after each crossing,
+        makes the decision chatter between two cells' actions (docs/executive.md). Arrival and
+        leaving the grid are never delayed; the layer and heading are always the measured ones.
+        """
+        look = self.lookup(lat_deg, lon_deg, depth_m, heading_deg)
+        if margin_cells <= 0.0 or held is None or look.state is None or look.reason not in ("ok", "unreachable", "land"):
+            return look
+        l, j, i, _k = look.state
+        hj, hi = held
+        if (j, i) == (hj, hi) or not self.near_cell(lat_deg, lon_deg, hj, hi, margin_cells) or not self.water[l, hj, hi]:
+            return look
+        return self.lookup_cell((l, hj, hi), heading_deg)
 
     def lookup_cell(self, cell: tuple[int, int, int], heading_deg: float) -> Lookup:
         """The action for cell ``(l, j, i)`` of the grid and a compass heading."""

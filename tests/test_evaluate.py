@@ -15,6 +15,7 @@ from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from planner.actions import Action
@@ -25,12 +26,14 @@ from planner.errors import PlannerError
 from planner.evaluate import (
     METHODS,
     OUTCOMES,
+    FeedbackPilot,
     NaivePilot,
     Referee,
     RunResult,
     Start,
     fly,
     pick_starts,
+    realise,
     summarise,
 )
 from planner.forecast import open_forecast
@@ -475,3 +478,85 @@ def test_open_loop_replays_the_expected_plans_nominal_path(gyre, mission, monkey
     # Feedback on the same plan in the same (steady, exact) truth arrives at least as often.
     fb = [r for r in campaign.results if r.method == "physical-expected"]
     assert sum(r.outcome == "arrived" for r in fb) >= sum(r.outcome == "arrived" for r in open_runs)
+
+
+# --------------------------------------------------------------------------- the feedback pilot, as the executive
+
+
+def _boundary_case(table):
+    """A FORWARD state whose east or west water neighbour, at the same heading, does something else."""
+    found = [(tuple(int(x) for x in s), di) for s in np.argwhere(table.actions == int(Action.FORWARD)) for di in (1, -1)
+             if 0 <= s[2] + di < table.nx and table.water[s[0], s[1], s[2] + di]
+             and table.actions[s[0], s[1], s[2] + di, s[3]] not in (int(Action.FORWARD), int(Action.AT_GOAL))]
+    assert found, "the plan has no FORWARD state beside another action"
+    return found[len(found) // 2]
+
+
+def _pilot_body(table, state, past_edge: float, di: int, time_s: float):
+    """A body in ``state``'s row, ``past_edge`` of a spacing beyond its east (di 1) or west edge, on its heading."""
+    from vehicle_sim.dynamics import Body
+
+    l, j, i, k = state
+    lat, lon = table.cell_centre(j, i)
+    return Body(lat_deg=lat, lon_deg=lon + di * (0.5 + past_edge) * table.dlon_deg, depth_m=table.depth_m[l],
+                heading_deg=table.bearing_deg(j, k), time_s=time_s)
+
+
+def test_feedback_pilot_keeps_a_cell_within_the_executives_margin(table):
+    """A vehicle on a boundary, pushed back and forth, does not make the decision chatter (executive.helm)."""
+    state, di = _boundary_case(table)
+    l, j, i, k = state
+    params = VehicleParams()
+    pilot = FeedbackPilot(lambda _t: table, params)
+    here = pilot.command(_pilot_body(table, state, -0.5, di, 0.0))  # the cell centre
+    assert here.kind is SetpointKind.VELOCITY and here.yaw_deg == pytest.approx(table.bearing_deg(j, k))
+    over = _pilot_body(table, state, 0.05, di, 2.0)  # 5 % into the neighbour: still this cell's action
+    assert table.locate(over.lat_deg, over.lon_deg, over.depth_m) == (l, j, i + di)
+    assert pilot.command(over) is here
+    beyond = _pilot_body(table, state, 0.15, di, 4.0)  # past the 10 % margin: the neighbour's action
+    theirs = pilot.command(beyond)
+    neighbour = (l, j, i + di, k)
+    assert theirs == realise(Action(int(table.actions[neighbour])), neighbour, table, beyond, params)[0]
+    assert theirs != here
+    # Without a margin the raw cell decides at once, as HelmConfig(cell_margin=0) does.
+    raw = FeedbackPilot(lambda _t: table, params, cell_margin=0.0)
+    assert raw.command(_pilot_body(table, state, -0.5, di, 0.0)) == here
+    assert raw.command(over) != here
+
+
+def test_feedback_pilot_drifts_where_the_plan_has_no_action_and_resumes_after(table):
+    """States the plan marks unreachable: drift at the layer's depth (executive.helm), not give up."""
+    state, di = _boundary_case(table)
+    l, j, i, k = state
+    actions = table.actions.copy()
+    actions[l, j, i, :] = int(Action.UNREACHABLE)  # this cell: no action at any heading
+    cut = replace(table, actions=actions)
+    params = VehicleParams()
+    pilot = FeedbackPilot(lambda _t: cut, params)
+    inside = _pilot_body(cut, state, -0.5, di, 0.0)
+    sp = pilot.command(inside)
+    assert sp == Setpoint(kind=SetpointKind.DEPTH, depth_m=cut.depth_m[l])  # no thrust, the layer's depth
+    # Carried into the neighbour (past the margin), the plan's action there takes over.
+    beyond = _pilot_body(cut, state, 0.15, di, 600.0)
+    neighbour = (l, j, i + di, k)
+    assert pilot.command(beyond) == realise(Action(int(cut.actions[neighbour])), neighbour, cut, beyond, params)[0]
+
+    # Flown: a current towards the neighbour carries the drifting vehicle out of the cut cell,
+    # and the run goes on (it does not end where the plan had no action).
+    referee = Referee(table=cut)
+    lat, lon = cut.cell_centre(j, i)
+    start = Start(lon_deg=lon, lat_deg=lat, depth_m=cut.depth_m[l], heading_deg=cut.bearing_deg(j, k))
+    seen = []
+
+    class Recording(FeedbackPilot):
+        def command(self, body):
+            sp = super().command(body)
+            seen.append((body, sp))
+            return sp
+
+    outcome, t, _energy = fly(Recording(lambda _t: cut, params), World.uniform(0.3 * di, 0.0), start, params, referee,
+                              dt_s=5.0, max_time_s=3 * 3600.0)
+    assert outcome != "gave_up"
+    in_cut = [sp for body, sp in seen if cut.locate(body.lat_deg, body.lon_deg, body.depth_m)[1:] == (j, i)]
+    assert in_cut and all(sp == Setpoint(kind=SetpointKind.DEPTH, depth_m=cut.depth_m[l]) for sp in in_cut)
+    assert len(in_cut) < len(seen)  # it got out, and then followed the plan
