@@ -11,6 +11,7 @@ Action mapping (ArduSub semantics, research/executive-anchors.md section 2.3):
 | action | mode | target |
 |---|---|---|
 | FORWARD | GUIDED | velocity along ``bearing_k(j)`` at cruise speed + yaw, re-sent every ``refresh_s`` (ArduSub drops velocity targets after 3 s) |
+| FORWARD_LEFT/RIGHT | GUIDED | as FORWARD, along the course a quarter of the way to ``bearing_{k+1}`` / ``bearing_{k-1}`` (physical plans) |
 | ROTATE_LEFT/RIGHT | GUIDED | zero velocity + yaw to ``bearing_{k+-1}(j)``; held until the heading bin is reached |
 | DRIFT | ALT_HOLD | depth of the current layer (no horizontal thrust: the current carries the vehicle) |
 | UP / DOWN | ALT_HOLD | depth of the neighbouring layer; held until that depth is reached |
@@ -41,7 +42,7 @@ from executive.state import (
     VelocityYaw,
 )
 from executive.geofence import inside
-from planner.actions import Action
+from planner.actions import FORWARD_ACTIONS, Action
 from planner.settings import BreachAction, OnArrival
 from planner.table import CELL_MARGIN, PolicyTable
 
@@ -377,8 +378,10 @@ def _switch(helm: HelmState, current: Activity | None, new: Activity, out: _Out,
 def _action_activity(action: Action, state: tuple[int, int, int, int], table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:
     l, j, _i, k = state
     base = dict(situation=Situation.FOLLOWING, action=action, cell=state, started_s=now_s)
-    if action == Action.FORWARD:
-        yaw = table.bearing_deg(j, k)  # spec section 2: steer along bearing_k(j) of this cell
+    if action in FORWARD_ACTIONS:
+        # spec section 2: steer along bearing_k(j) of this cell; FORWARD_LEFT/RIGHT (physical plans) a
+        # quarter of the way to the neighbouring heading's bearing (docs/physical-model.md, "Courses")
+        yaw = table.course_deg(j, k, action)
         rad = math.radians(yaw)
         speed = config.cruise_speed_m_s
         target = VelocityYaw(speed * math.cos(rad), speed * math.sin(rad), 0.0, yaw)

@@ -1,4 +1,5 @@
-"""Action codes of the paper model (spec section 5) and the two table-only codes (section 6).
+"""Action codes of the paper model (spec section 5), the two table-only codes (section 6), and the
+physical model's two course-offset FORWARDs (docs/physical-model.md, "Courses").
 
 Numpy-free and dependency-free: the executive imports it through ``planner.table``.
 """
@@ -20,6 +21,12 @@ class Action(IntEnum):
     DOWN = 5
     AT_GOAL = 6
     UNREACHABLE = 7
+    # Physical model only: FORWARD on a course a quarter of the way from bearing_k towards the
+    # bearing of ROTATE_LEFT's (k + 1) or ROTATE_RIGHT's (k - 1) heading; the vehicle's heading
+    # stays in heading k's sector (planner.headings.courses_deg).
+    FORWARD_LEFT = 8
+    FORWARD_RIGHT = 9
 
 
 MOVE_ACTIONS = (Action.DRIFT, Action.FORWARD, Action.ROTATE_LEFT, Action.ROTATE_RIGHT, Action.UP, Action.DOWN)
+FORWARD_ACTIONS = (Action.FORWARD, Action.FORWARD_LEFT, Action.FORWARD_RIGHT)

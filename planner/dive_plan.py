@@ -69,7 +69,9 @@ def table_settings(table: PolicyTable) -> PlanSettings:
     physical, vehicle = PhysicalSettings(), VehicleParams()
     if table.physical is not None:
         try:
-            physical = PhysicalSettings(**table.physical.get("sampling", {}))  # type: ignore[arg-type]
+            # A table from before course offsets existed planned with the eight bearings only.
+            sampling = {"course_offsets": False, **table.physical.get("sampling", {})}
+            physical = PhysicalSettings(**sampling)  # type: ignore[arg-type]
             vehicle = VehicleParams(**table.physical.get("vehicle", {}))  # type: ignore[arg-type]
         except TypeError as exc:  # a key this version does not know
             raise PlannerError(f"{name}: header physical: {exc}; planned by a newer planner?") from None

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Literal, Protocol, get_args
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.actions import Action
+from planner.actions import FORWARD_ACTIONS, Action
 from planner.table import CELL_MARGIN, PolicyTable
 from vehicle_sim.dynamics import M_PER_DEG_LAT, Body, Setpoint, SetpointKind, VehicleParams, step
 
@@ -148,8 +148,8 @@ def realise(action: Action, state: tuple[int, int, int, int], table: PolicyTable
             params: VehicleParams) -> tuple[Setpoint, Callable[[Body], bool] | None]:
     """The setpoint for an action in a state, and for ROTATE/UP/DOWN the test that it is done."""
     l, j, _i, k = state
-    if action == Action.FORWARD:
-        yaw = table.bearing_deg(j, k)
+    if action in FORWARD_ACTIONS:
+        yaw = table.course_deg(j, k, action)
         rad = math.radians(yaw)
         speed = params.cruise_speed_m_s
         return Setpoint(kind=SetpointKind.VELOCITY, north_m_s=speed * math.cos(rad), east_m_s=speed * math.sin(rad),

@@ -50,6 +50,23 @@ def bearings_deg(dx_m: NDArray[np.float64], dy_m: float) -> NDArray[np.float64]:
     return np.mod(b, 360.0)
 
 
+# FORWARD_LEFT/RIGHT steer this fraction of the way to the neighbouring heading's bearing: half-way
+# to the edge of heading k's sector, so the vehicle's heading still reads as k (docs/physical-model.md).
+COURSE_FRACTION = 0.25
+
+
+def courses_deg(bearings: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Compass courses ``(ny, 8, 3)`` of FORWARD, FORWARD_LEFT and FORWARD_RIGHT per row and heading.
+
+    Left is towards ``bearing_{k+1}`` (counter-clockwise, ROTATE_LEFT's heading), right towards
+    ``bearing_{k-1}``; each ``COURSE_FRACTION`` of the angle between the two bearings.
+    """
+    b = np.asarray(bearings, dtype=np.float64)
+    to_left = np.mod(b - np.roll(b, -1, axis=1), 360.0)  # clockwise angle from bearing_{k+1} up to bearing_k
+    to_right = np.mod(np.roll(b, 1, axis=1) - b, 360.0)  # from bearing_k up to bearing_{k-1}
+    return np.mod(np.stack([b, b - COURSE_FRACTION * to_left, b + COURSE_FRACTION * to_right], axis=2), 360.0)
+
+
 def heading_index(heading_deg: float, row_bearings_deg: NDArray[np.float64]) -> int:
     """The ``k`` whose bearing in this row is nearest to ``heading_deg``; ties go to the lower ``k``."""
     diff = np.abs(np.mod(float(heading_deg) - row_bearings_deg + 180.0, 360.0) - 180.0)

@@ -456,11 +456,12 @@ def _physical(doc: _Doc, pl: _Section) -> PhysicalSettings:
     A key that is absent or null keeps ``PhysicalSettings``' default (for ``max_transition_s`` that is None:
     the model's own limit from the cell size and the cruise speed).
     """
-    ph = pl.section("physical", set(PHYSICAL_INTEGERS) | set(PHYSICAL_NUMBERS))
+    ph = pl.section("physical", set(PHYSICAL_INTEGERS) | set(PHYSICAL_NUMBERS) | {"course_offsets"})
     d = PhysicalSettings()
     values: dict[str, Any] = {name: ph.integer(name) if ph.has(name) else getattr(d, name) for name in PHYSICAL_INTEGERS}
     values.update({name: ph.number(name, unit=unit) if ph.has(name) else getattr(d, name)
                    for name, unit in PHYSICAL_NUMBERS.items()})
+    values["course_offsets"] = ph.boolean("course_offsets", d.course_offsets)
     try:
         return PhysicalSettings(**values)
     except PlannerError as exc:  # "physical.NAME: message"

@@ -7,7 +7,8 @@ docs/physical-model.md gives the reasoning; in short, for every water cell and a
   (``PhysicalSettings``);
 - its motion, over ground = through-water velocity + current, is integrated with RK4 through
   the current interpolated bilinearly between grid nodes (a node on land makes the point land,
-  as ``vehicle_sim.world`` does): FORWARD at the cruise speed along the heading's bearing, DRIFT
+  as ``vehicle_sim.world`` does): FORWARD at the cruise speed along the heading's bearing
+  (FORWARD_LEFT/RIGHT along ``planner.headings.courses_deg``'s offset courses), DRIFT
   with no thrust, UP/DOWN with no thrust while gliding at the glide rate to the next layer
   (the current blended between the two layers by depth), ROTATE holding station for
   45 deg / yaw rate (ArduSub GUIDED with zero velocity, as the executive commands it);
@@ -36,14 +37,15 @@ from numpy.typing import NDArray
 
 from planner.errors import GridError
 from planner.grid import Grid
-from planner.headings import EARTH_RADIUS_M, N_HEADINGS
+from planner.headings import EARTH_RADIUS_M, N_HEADINGS, courses_deg
 from planner.settings import PhysicalSettings, PlanSettings
 from planner.transitions import flow_directions
 from vehicle_sim.dynamics import power_draw_w
 
-# Sample channels per cell: DRIFT, UP, DOWN, then FORWARD along each of the eight headings.
-_CH_DRIFT, _CH_UP, _CH_DOWN, _CH_FORWARD = 0, 1, 2, 3
-N_CHANNELS = 3 + N_HEADINGS
+# Sample channels per cell: DRIFT, UP, DOWN, then FORWARD along each of the eight headings, then
+# (with course offsets) FORWARD_LEFT and FORWARD_RIGHT along each (planner.headings.courses_deg).
+N_CHANNELS_BEARINGS = 3 + N_HEADINGS
+N_CHANNELS_COURSES = 3 + 3 * N_HEADINGS
 _SLOTS = 25  # outcome cells within +-2 cells: slot = (dj + 2) * 5 + (di + 2)
 MAX_REFINE = 8
 
@@ -196,14 +198,15 @@ def sample_transitions(
     ps, vp = settings.physical, settings.vehicle
     _dx_m, dy_m = grid.cell_size_m()
     t_max = transition_limit_s(grid, settings)
-    bearing_rad = np.radians(grid.bearings_deg())  # (ny, 8), clockwise from north
+    course_rad = np.ascontiguousarray(np.radians(courses_deg(grid.bearings_deg())))  # (ny, 8, 3), clockwise from north
     offsets = start_offsets(ps)
     members = member_offsets_m_s(ps)
-    count = np.zeros((L * ny * nx, N_CHANNELS, _SLOTS), dtype=np.int32)
-    emax = np.zeros((L * ny * nx, N_CHANNELS, _SLOTS), dtype=np.float64)
-    esum = np.zeros((L * ny * nx, N_CHANNELS), dtype=np.float64)
-    tsum = np.zeros((L * ny * nx, N_CHANNELS), dtype=np.float64)
-    hazard = np.zeros((L * ny * nx, N_CHANNELS), dtype=np.bool_)
+    n_ch = N_CHANNELS_COURSES if ps.course_offsets else N_CHANNELS_BEARINGS
+    count = np.zeros((L * ny * nx, n_ch, _SLOTS), dtype=np.int32)
+    emax = np.zeros((L * ny * nx, n_ch, _SLOTS), dtype=np.float64)
+    esum = np.zeros((L * ny * nx, n_ch), dtype=np.float64)
+    tsum = np.zeros((L * ny * nx, n_ch), dtype=np.float64)
+    hazard = np.zeros((L * ny * nx, n_ch), dtype=np.bool_)
     powers = np.array([
         float(power_draw_w(vp, 0.0, False)),  # DRIFT
         float(power_draw_w(vp, 0.0, True)),  # UP / DOWN: no thrust, buoyancy engine
@@ -212,7 +215,7 @@ def sample_transitions(
     goal = np.zeros((L, ny, nx), dtype=np.bool_) if goal_mask is None else np.ascontiguousarray(goal_mask, dtype=np.bool_)
     _sample_cells(
         uf, vf, water, goal, refine, float(grid.lat_deg[0]), grid.dlat_deg, math.radians(grid.dlon_deg), dy_m,
-        np.asarray(grid.depth_m, dtype=np.float64), bearing_rad, offsets, members,
+        np.asarray(grid.depth_m, dtype=np.float64), course_rad, offsets, members,
         vp.cruise_speed_m_s, vp.glide_rate_m_s, t_max, ps.rk4_steps, powers,
         count, emax, esum, tsum, hazard,
     )
@@ -406,7 +409,7 @@ def _nearest(x):  # pragma: no cover
 
 
 @numba.njit(cache=True, parallel=True)
-def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth_m, bearing_rad, offsets, members,
+def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth_m, course_rad, offsets, members,
                   speed, glide_rate, t_max, rk4_steps, powers, count, emax, esum, tsum, hazard):  # pragma: no cover
     L, ny, nx = water.shape
     n_off = offsets.shape[0]
@@ -423,7 +426,7 @@ def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth
         cu = _interp(uf, l, i * refine, j * refine)
         cv = _interp(vf, l, i * refine, j * refine)
         cur = math.hypot(cu, cv)
-        for ch in range(3 + 8):
+        for ch in range(count.shape[1]):
             lb = l
             glide_s = 0.0
             we = 0.0
@@ -440,7 +443,7 @@ def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth
                 power = powers[0]
                 v_water = 0.0
                 if ch >= 3:
-                    b = bearing_rad[j, ch - 3]
+                    b = course_rad[j, (ch - 3) % 8, (ch - 3) // 8]
                     we = speed * math.sin(b)
                     wn = speed * math.cos(b)
                     power = powers[2]
@@ -481,8 +484,22 @@ def _decode(s, L, ny, nx):  # pragma: no cover
 
 @numba.njit(cache=True, inline="always")
 def _channel(a, k):  # pragma: no cover
-    """The sample channel of a move action: DRIFT 0, UP 1, DOWN 2, FORWARD 3 + heading."""
-    return 0 if a == 0 else (3 + k if a == 1 else (1 if a == 4 else 2))
+    """The sample channel of a move action: DRIFT 0, UP 1, DOWN 2, FORWARD 3 + heading,
+    FORWARD_LEFT 11 + heading, FORWARD_RIGHT 19 + heading."""
+    if a == 0:
+        return 0
+    if a == 1:
+        return 3 + k
+    if a == 4:
+        return 1
+    if a == 5:
+        return 2
+    return 11 + k if a == 8 else 19 + k
+
+
+# Pair actions per state, in code order (ties go to the first): DRIFT, FORWARD, ROTATE_LEFT,
+# ROTATE_RIGHT, UP, DOWN, then FORWARD_LEFT, FORWARD_RIGHT where sampled.
+_PAIR_ACTIONS = np.array([0, 1, 2, 3, 4, 5, 8, 9], dtype=np.int64)
 
 
 @numba.njit(cache=True)
@@ -490,13 +507,14 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
     """Flatten the per-cell samples into per-(state, action) outcome lists, states in index order."""
     L, ny, nx = water.shape
     n_states = 8 * L * ny * nx
+    n_actions = 8 if count.shape[1] > 11 else 6
     n_pairs = 0
     n_out = 0
     for s in range(n_states):  # pass 1: sizes
         k, c, l, j, i = _decode(s, L, ny, nx)
         if not water[l, j, i]:
             continue
-        for a in range(6):
+        for a in _PAIR_ACTIONS[:n_actions]:
             if a == 2 or a == 3:
                 n_pairs += 1
                 n_out += 1
@@ -523,7 +541,7 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
         k, c, l, j, i = _decode(s, L, ny, nx)
         if not water[l, j, i]:
             continue
-        for a in range(6):
+        for a in _PAIR_ACTIONS[:n_actions]:
             if a == 2 or a == 3:
                 k2 = (k + 1) % 8 if a == 2 else (k + 7) % 8
                 out_state[e] = ((k2 * L + l) * ny + j) * nx + i

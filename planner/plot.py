@@ -58,6 +58,8 @@ FLOW_ARROW_COLOR = "#8c96a3"
 ACTION_COLORS: dict[Action, str] = {
     Action.DRIFT: "#0072b2",
     Action.FORWARD: "#d55e00",
+    Action.FORWARD_LEFT: "#a6430a",  # physical plans' course offsets: darker and lighter FORWARD
+    Action.FORWARD_RIGHT: "#f08a4b",
     Action.ROTATE_LEFT: "#cc79a7",
     Action.ROTATE_RIGHT: "#e69f00",
     Action.UP: "#009e73",
@@ -66,7 +68,8 @@ ACTION_COLORS: dict[Action, str] = {
     Action.UNREACHABLE: "#7f7f7f",
 }
 _ROTATE_MARKER = {Action.ROTATE_LEFT: r"$\circlearrowleft$", Action.ROTATE_RIGHT: r"$\circlearrowright$"}
-_STILL_MARKER = {Action.DRIFT: "o", Action.FORWARD: "o", Action.UP: "^", Action.DOWN: "v"}
+_STILL_MARKER = {Action.DRIFT: "o", Action.FORWARD: "o", Action.FORWARD_LEFT: "o", Action.FORWARD_RIGHT: "o",
+                 Action.UP: "^", Action.DOWN: "v"}
 _MAX_ARROWS_PER_AXIS = 40  # thin out arrows on big grids so they stay readable
 _MAX_FLOW_ARROWS_PER_PANEL = 28
 

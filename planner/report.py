@@ -74,8 +74,8 @@ OTHER_ACTION_COLOR = "#b15928"  # an action name this version does not know
 MAX_TRACK_POINTS = 4000  # points drawn on the map, all runs together (about)
 MAX_SERIES_POINTS = 5000  # points per line in the time series
 _MAX_CURRENT_ARROWS_PER_AXIS = 28
-_DRAWN_ACTIONS = (Action.FORWARD, Action.DRIFT, Action.ROTATE_LEFT, Action.ROTATE_RIGHT, Action.UP, Action.DOWN,
-                  Action.AT_GOAL, Action.UNREACHABLE)
+_DRAWN_ACTIONS = (Action.FORWARD, Action.FORWARD_LEFT, Action.FORWARD_RIGHT, Action.DRIFT, Action.ROTATE_LEFT,
+                  Action.ROTATE_RIGHT, Action.UP, Action.DOWN, Action.AT_GOAL, Action.UNREACHABLE)
 _NEED_FORECAST = "the planning forecast (pass --forecast)"
 
 

@@ -106,8 +106,13 @@ class PhysicalSettings:
     min_cost_wh: float = 1e-6  # cost floor: no zero-cost cycles in the expected criterion
     tolerance_wh: float = 1e-9  # policy iteration switches an action only when better by more (< the floor)
     max_iterations: int = 500  # policy iteration's guard
+    # FORWARD_LEFT/RIGHT besides FORWARD: courses a quarter of the way to the neighbouring headings
+    # (docs/physical-model.md, "Courses"); False plans with the eight grid bearings only.
+    course_offsets: bool = True
 
     def __post_init__(self) -> None:
+        if not isinstance(self.course_offsets, bool):
+            raise PlannerError(f"physical.course_offsets: expected true or false; got {self.course_offsets!r}")
         for name in ("start_points", "error_members", "rk4_steps", "max_iterations"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < (0 if name == "error_members" else 1):

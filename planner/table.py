@@ -22,10 +22,10 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.actions import Action
+from planner.actions import FORWARD_ACTIONS, Action
 from planner.atomic import write_atomic
 from planner.errors import TableError
-from planner.headings import N_HEADINGS, bearings_deg, cell_size_m
+from planner.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
 
 MAGIC = b"LRAUVPT\x00"
 FORMAT_VERSION = 1
@@ -82,7 +82,7 @@ class PolicyTable:
     actions: NDArray[np.uint8] = field(repr=False)  # (L, ny, nx, 8)
     water: NDArray[np.bool_] = field(repr=False)  # (L, ny, nx)
     # Physical plans: {"vehicle": {...}, "sampling": {...}} (docs/policy-table.md); None for the paper model.
-    physical: dict[str, dict[str, float | int | None]] | None = None
+    physical: dict[str, dict[str, float | int | bool | None]] | None = None
 
     def __post_init__(self) -> None:
         shape = (len(self.depth_m), self.ny, self.nx)
@@ -96,6 +96,7 @@ class PolicyTable:
         object.__setattr__(self, "_bearings", bearings)
         # Plain floats for the per-message lookup: numpy's per-call overhead dominates on 8 values.
         object.__setattr__(self, "_bearing_rows", tuple(tuple(float(b) for b in row) for row in bearings))
+        object.__setattr__(self, "_course_rows", courses_deg(bearings).tolist())
 
     @classmethod
     def from_solution(
@@ -167,6 +168,11 @@ class PolicyTable:
     def bearing_deg(self, j: int, k: int) -> float:
         """True compass bearing of grid direction ``k`` in row ``j`` (spec section 2)."""
         return float(self._bearings[j, k])  # type: ignore[attr-defined]
+
+    def course_deg(self, j: int, k: int, action: Action) -> float:
+        """Compass course of a FORWARD action in heading ``k`` of row ``j``: ``bearing_k(j)`` for FORWARD,
+        a quarter of the way to the neighbouring heading's bearing for FORWARD_LEFT/RIGHT."""
+        return self._course_rows[j][k][FORWARD_ACTIONS.index(action)]  # type: ignore[attr-defined]
 
     def cell_centre(self, j: int, i: int) -> tuple[float, float]:
         """``(lat_deg, lon_deg)`` of a cell centre."""
@@ -366,8 +372,11 @@ class PolicyTable:
                 f"{N_HEADINGS} needs {expected:,}"
             )
         water, actions = _unpack_payload(raw, shape)
-        if np.any(actions > Action.UNREACHABLE):
-            raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} in the payload")
+        if np.any(actions > max(Action)):
+            raise TableError(f"{name}: action codes above {int(max(Action))} in the payload")
+        if fields["model"] != "physical" and np.any(actions > Action.UNREACHABLE):
+            raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a "
+                             f"{fields['model']}-model table; only physical plans have them")
         if np.any(actions[~water] != Action.UNREACHABLE):
             raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
         table = cls(actions=actions, water=water, **fields)
@@ -483,8 +492,8 @@ def _header_fields(header: Any) -> dict[str, Any]:
         fields["physical"] = {}
         for part in ("vehicle", "sampling"):
             values = _section(_key(physical, part, "physical"), f"physical.{part}")
-            # null: a sampling setting left to the model (max_transition_s)
-            fields["physical"][part] = {str(k): None if v is None and part == "sampling" else
+            # null: a sampling setting left to the model (max_transition_s); true/false: a switch (course_offsets)
+            fields["physical"][part] = {str(k): v if (v is None or isinstance(v, bool)) and part == "sampling" else
                                         _number(v, f"physical.{part}.{k}") for k, v in values.items()}
     return fields
 

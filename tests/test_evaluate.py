@@ -557,6 +557,8 @@ def test_feedback_pilot_drifts_where_the_plan_has_no_action_and_resumes_after(ta
     outcome, t, _energy = fly(Recording(lambda _t: cut, params), World.uniform(0.3 * di, 0.0), start, params, referee,
                               dt_s=5.0, max_time_s=3 * 3600.0)
     assert outcome != "gave_up"
-    in_cut = [sp for body, sp in seen if cut.locate(body.lat_deg, body.lon_deg, body.depth_m)[1:] == (j, i)]
-    assert in_cut and all(sp == Setpoint(kind=SetpointKind.DEPTH, depth_m=cut.depth_m[l]) for sp in in_cut)
-    assert len(in_cut) < len(seen)  # it got out, and then followed the plan
+    drift = Setpoint(kind=SetpointKind.DEPTH, depth_m=cut.depth_m[l])
+    resumed = next(n for n, (_body, sp) in enumerate(seen) if sp != drift)  # the plan took over here
+    assert resumed > 0 and all(sp == drift for _body, sp in seen[:resumed])
+    body = seen[resumed][0]
+    assert cut.locate(body.lat_deg, body.lon_deg, body.depth_m)[1:] == (j, i + di)  # carried out of the cut cell

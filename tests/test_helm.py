@@ -81,6 +81,27 @@ def test_forward_streams_velocity_along_the_cells_bearing(table):
     assert not again.decision.changed
 
 
+@pytest.mark.parametrize(("action", "dk"), [(Action.FORWARD_LEFT, +1), (Action.FORWARD_RIGHT, -1)])
+def test_course_offset_forward_streams_velocity_a_quarter_of_the_way_to_the_neighbouring_bearing(table, action, dk):
+    """Physical plans' FORWARD_LEFT/RIGHT (docs/physical-model.md, "Courses")."""
+    state = _state_with(table, Action.FORWARD)
+    l, j, _i, k = state
+    actions = table.actions.copy()
+    actions[state] = int(action)
+    physical = replace(table, actions=actions, model="physical")
+    tick = _run(physical, _vehicle_at(physical, state))
+    assert tick.decision.action == action and tick.decision.cell == state
+    (cmd,) = tick.commands
+    assert isinstance(cmd, VelocityYaw)
+    bearing, neighbour = table.bearing_deg(j, k), table.bearing_deg(j, (k + dk) % 8)
+    turn = (cmd.yaw_deg - bearing + 180.0) % 360.0 - 180.0
+    assert turn == pytest.approx(0.25 * ((neighbour - bearing + 180.0) % 360.0 - 180.0))
+    assert turn < 0 if action == Action.FORWARD_LEFT else turn > 0  # left: counter-clockwise
+    assert table.heading_index(j, cmd.yaw_deg) == k  # the vehicle's heading stays in heading k
+    assert math.hypot(cmd.north_m_s, cmd.east_m_s) == pytest.approx(CONFIG.cruise_speed_m_s)
+    assert math.degrees(math.atan2(cmd.east_m_s, cmd.north_m_s)) % 360 == pytest.approx(cmd.yaw_deg % 360)
+
+
 def test_forward_waits_for_guided_before_streaming(table):
     state = _state_with(table, Action.FORWARD)
     tick = _run(table, _vehicle_at(table, state, mode=int(SubMode.ALT_HOLD)))

@@ -133,6 +133,45 @@ def test_forward_in_still_water_moves_one_cell_at_cruise_speed(k, axis):
     assert model.samples_per_action == EXACT.start_points ** 2
 
 
+@pytest.mark.parametrize("k", [0, 2, 5])
+def test_course_offset_forwards_in_still_water_follow_their_course(k):
+    """FORWARD_LEFT/RIGHT: a quarter of the way to the neighbouring bearing; the one-spacing end in
+    still water is then spacing / (speed x cos of the course's angle to the axis it crosses)."""
+    from planner.headings import courses_deg, heading_index
+
+    grid = small_grid()
+    u, v = uniform(grid, 2)
+    model = build(u, v, grid, settings(), 2)
+    l, j, i = 0, 2, 2
+    bearings = grid.bearings_deg()
+    courses = courses_deg(bearings)[j, k]
+    left, right = float(bearings[j, (k + 1) % 8]), float(bearings[j, (k - 1) % 8])
+    b = float(bearings[j, k])
+    assert courses[0] == pytest.approx(b)
+    for course, neighbour in ((courses[1], left), (courses[2], right)):
+        turn = (course - b + 180.0) % 360.0 - 180.0
+        gap = (neighbour - b + 180.0) % 360.0 - 180.0
+        assert turn == pytest.approx(0.25 * gap)  # towards the neighbour, a quarter of the way
+        assert heading_index(float(course), bearings[j]) == k  # the heading still reads as k
+    dx_m, dy_m = grid.cell_size_m()
+    for action, course in ((int(Action.FORWARD_LEFT), courses[1]), (int(Action.FORWARD_RIGHT), courses[2])):
+        p = pair(model, l, j, i, k, action)
+        assert p is not None
+        rad = math.radians(float(course))
+        east, north = abs(math.sin(rad)), abs(math.cos(rad))
+        expected_s = min(float(dx_m[j]) / east if east > 1e-9 else math.inf, dy_m / north if north > 1e-9 else math.inf)
+        assert model.duration_s[p] == pytest.approx(expected_s / PARAMS.cruise_speed_m_s, rel=0.01)
+        # Every sample ends one spacing away along the course: in the cells that direction reaches.
+        for (_l, jj, ii, kk), _prob, _e in model.outcomes(p):
+            assert kk == k and (ii - i) * math.sin(rad) >= 0 and (jj - j) * math.cos(rad) >= 0
+    # Switched off: the eight bearings only, as before course offsets existed.
+    plain = build(u, v, grid, settings(physical=replace(EXACT, course_offsets=False)), 2)
+    assert not np.isin(plain.pair_action, [int(Action.FORWARD_LEFT), int(Action.FORWARD_RIGHT)]).any()
+    assert pair(plain, l, j, i, k, FORWARD) is not None
+    p_on, p_off = pair(model, l, j, i, k, FORWARD), pair(plain, l, j, i, k, FORWARD)
+    assert model.outcomes(p_on) == plain.outcomes(p_off) and model.energy_wh[p_on] == plain.energy_wh[p_off]
+
+
 # --------------------------------------------------------------------------- 2. DRIFT in a uniform current
 
 
@@ -555,15 +594,17 @@ def test_make_plan_physical_end_to_end(physical_plans):
         assert table.model == "physical"
         acts = table.actions
         assert acts.shape == result.grid.shape
-        assert np.all(acts <= Action.UNREACHABLE)
+        assert np.all(acts <= Action.FORWARD_RIGHT)
         at_goal = acts == Action.AT_GOAL
         assert np.array_equal(at_goal, np.broadcast_to(sol.goal_cells.mask[..., None], acts.shape))
         assert np.all(acts[~result.model.water] == Action.UNREACHABLE)
         assert np.array_equal(acts == Action.UNREACHABLE, ~np.isfinite(sol.value_wh))
         reach = np.isfinite(sol.value_wh) & ~at_goal
         assert reach.sum() > 0.5 * result.model.water.sum() * 8
-        # Every move uses a pair of its own state.
-        assert np.all(acts[reach] <= Action.DOWN)
+        moves = acts[reach]
+        assert np.all((moves <= Action.DOWN) | (moves == Action.FORWARD_LEFT) | (moves == Action.FORWARD_RIGHT))
+        # The course offsets are used (the default), on both sides.
+        assert (moves == Action.FORWARD_LEFT).any() and (moves == Action.FORWARD_RIGHT).any()
     # Every state the worst case can bring home, the mean can too, and the worst case is never cheaper.
     r, e = rob.solution.value_wh, exp.solution.value_wh
     assert np.all(np.isfinite(e)[np.isfinite(r)])

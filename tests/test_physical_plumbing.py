@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from planner.actions import Action
 from planner.errors import MissionError, TableError
 from planner.mission import Vehicle, load_mission
 from planner.settings import PhysicalSettings
@@ -89,6 +90,7 @@ def test_paper_mission_keeps_its_settings_and_defaults_come_from_vehicle_params(
         ("max_transition_s: null ", "max_transition_s: 0 ", "planning.physical.max_transition_s", "> 0"),
         ("min_cost_wh: 1.0e-6 ", "min_cost_wh: tiny ", "planning.physical.min_cost_wh", "expected a number in Wh"),
         ("rk4_steps: 8 ", "rk4_stepz: 8 ", "planning.physical.rk4_stepz", "unknown key"),
+        ("course_offsets: true ", "course_offsets: 1 ", "planning.physical.course_offsets", "expected true or false; got 1"),
     ],
 )
 def test_bad_planning_keys_name_file_line_and_key(tmp_path, old, new, key, message):
@@ -166,7 +168,8 @@ def test_physical_header_round_trips_the_settings(physical_plan):
     assert header["physical"]["sampling"] == asdict(PhysicalSettings())  # the mission spells out the defaults
     assert set(header["physical"]["sampling"]) == {
         "start_points", "current_error_m_s", "error_members", "max_transition_s", "rk4_steps", "min_cost_wh",
-        "tolerance_wh", "max_iterations"}
+        "tolerance_wh", "max_iterations", "course_offsets"}
+    assert header["physical"]["sampling"]["course_offsets"] is True
     assert header["physical"]["vehicle"] == {
         "cruise_speed_m_s": 1.0, "max_speed_m_s": 1.5, "yaw_rate_deg_s": 10.0, "glide_rate_m_s": 0.2,
         "hotel_w": 8.0, "propulsion_w": 12.0, "buoyancy_w": 15.0, "battery_wh": 3000.0}
@@ -207,7 +210,12 @@ def test_old_paper_tables_still_load_and_bad_physical_headers_are_refused(physic
     table = PolicyTable.load(table_path)
     old = {k: v for k, v in table.header().items() if k != "physical"}
     old.update(model="paper", criterion="robust", costs={"drift": 0, "forward": 4, "rotate": 10, "glide": 2})
-    paper = PolicyTable.from_bytes(_pack(old, table.water, table.actions))
+    courses = (table.actions == Action.FORWARD_LEFT) | (table.actions == Action.FORWARD_RIGHT)
+    assert courses.any()
+    with pytest.raises(TableError, match="course offsets.*paper-model table"):  # codes 8, 9 are physical only
+        PolicyTable.from_bytes(_pack(old, table.water, table.actions))
+    paper_actions = np.where(courses, np.uint8(Action.FORWARD), table.actions)
+    paper = PolicyTable.from_bytes(_pack(old, table.water, paper_actions))
     assert paper.physical is None and paper.model == "paper" and paper.costs["rotate"] == 10
     assert "physical" not in paper.header() and paper.header() == old
     # A paper table written now has the bytes it always had: no "physical" key.
