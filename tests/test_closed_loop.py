@@ -160,3 +160,50 @@ def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, syntheti
     assert any(m.startswith("link lost") for m in logs), logs
     assert summary is not None
     assert_audit_clean(tmp_path / "silent.mcap")  # link loss and its recovery run again the same way
+
+
+def test_a_physical_plans_course_offsets_fly_over_mavlink(synthetic_forecast, tmp_path):
+    """A physical plan with FORWARD_LEFT/RIGHT through ``lrauv exec`` and ``lrauv sim`` over UDP:
+    the executive commands the offset course, the vehicle holds it, and the audit agrees."""
+    from planner.actions import Action
+    from planner.mission import load_mission
+    from planner.plan import PlanRequest, make_plan
+    from vehicle_sim.demo import run_closed_loop
+
+    mission_path = REPO / "missions" / "demo-physical.yaml"
+    result = make_plan(PlanRequest.for_mission(load_mission(mission_path), synthetic_forecast))
+    table, sol = result.table, result.solution
+    offsets = {Action.FORWARD_LEFT, Action.FORWARD_RIGHT}
+    # The nearest start (east-bound, at the surface) whose nominal path begins with a course offset.
+    gj, gi = round((table.goal_lat_deg - table.lat0_deg) / table.dlat_deg), round((table.goal_lon_deg - table.lon0_deg) / table.dlon_deg)
+    candidates = sorted(((abs(j - gj) + abs(i - gi), j, i) for j in range(table.ny) for i in range(table.nx)
+                         if 3 <= abs(j - gj) + abs(i - gi) <= 6 and table.water[0, j, i]))
+    start = next(((j, i) for _d, j, i in candidates
+                  if Action(int(table.actions[0, j, i, 0])) in offsets and len(sol.nominal((0, j, i, 0))) > 2), None)
+    assert start is not None, "no start near the goal begins with a course offset"
+    j, i = start
+    lat, lon = table.cell_centre(j, i)
+    table_path = tmp_path / "physical.lrpt"
+    table.save(table_path)
+    run = run_closed_loop(table=table_path, mission=mission_path, truth=synthetic_forecast, start=f"{lon},{lat}",
+                          depth_m=0.0, heading_deg=float(table.bearing_deg(j, 0)), speedup=SPEEDUP, out=tmp_path,
+                          timeout_s=90.0)
+    assert run.exec_status == 0, run.exec_output
+    assert "goal       reached" in run.exec_output
+    messages = list(read_messages(run.log_path, ["/executive/decision", "/executive/command"]))
+    decisions = [p for topic, _, p in messages if topic == "/executive/decision"]
+    flown = [d for d in decisions if d["action"] in ("FORWARD_LEFT", "FORWARD_RIGHT")]
+    assert flown, {d["action"] for d in decisions}
+    # Each course-offset decision is followed by a velocity command along that state's offset course.
+    courses = {(tuple(d["cell"]), d["action"]) for d in flown if d["changed"]}
+    commanded = [p["yaw_deg"] for topic, _, p in messages if topic == "/executive/command" and p["kind"] == "VelocityYaw"]
+    for (l, jj, ii, k), name in courses:
+        course = table.course_deg(jj, k, Action[name])
+        assert any(abs((y - course + 180.0) % 360.0 - 180.0) < 1e-6 for y in commanded), (name, course)
+    # The vehicle holds the course: late in each such activity its measured heading is near it.
+    late = [d for d in flown if not d["changed"] and d["heading_deg"] is not None]
+    assert late
+    errors = [abs((d["heading_deg"] - table.course_deg(d["cell"][1], d["cell"][3], Action[d["action"]]) + 180.0) % 360.0 - 180.0)
+              for d in late]
+    assert sorted(errors)[len(errors) // 2] < 3.0, errors[:20]
+    assert_audit_clean(run.log_path)
