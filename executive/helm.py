@@ -11,7 +11,7 @@ Action mapping (ArduSub semantics, research/executive-anchors.md section 2.3):
 | action | mode | target |
 |---|---|---|
 | FORWARD | GUIDED | velocity along ``bearing_k(j)`` at cruise speed + yaw, re-sent every ``refresh_s`` (ArduSub drops velocity targets after 3 s) |
-| FORWARD_LEFT/RIGHT | GUIDED | as FORWARD, along the course a quarter of the way to ``bearing_{k+1}`` / ``bearing_{k-1}`` (physical plans) |
+| FORWARD_LEFT/RIGHT | GUIDED | as FORWARD, along the course a third of the way to ``bearing_{k+1}`` / ``bearing_{k-1}`` (physical plans) |
 | ROTATE_LEFT/RIGHT | GUIDED | zero velocity + yaw to ``bearing_{k+-1}(j)``; held until the heading bin is reached |
 | DRIFT | ALT_HOLD | depth of the current layer (no horizontal thrust: the current carries the vehicle) |
 | UP / DOWN | ALT_HOLD | depth of the neighbouring layer; held until that depth is reached |
@@ -380,7 +380,7 @@ def _action_activity(action: Action, state: tuple[int, int, int, int], table: Po
     base = dict(situation=Situation.FOLLOWING, action=action, cell=state, started_s=now_s)
     if action in FORWARD_ACTIONS:
         # spec section 2: steer along bearing_k(j) of this cell; FORWARD_LEFT/RIGHT (physical plans) a
-        # quarter of the way to the neighbouring heading's bearing (docs/physical-model.md, "Courses")
+        # third of the way to the neighbouring heading's bearing (docs/physical-model.md, "Courses")
         yaw = table.course_deg(j, k, action)
         rad = math.radians(yaw)
         speed = config.cruise_speed_m_s

@@ -21,7 +21,7 @@ class Action(IntEnum):
     DOWN = 5
     AT_GOAL = 6
     UNREACHABLE = 7
-    # Physical model only: FORWARD on a course a quarter of the way from bearing_k towards the
+    # Physical model only: FORWARD on a course a third of the way from bearing_k towards the
     # bearing of ROTATE_LEFT's (k + 1) or ROTATE_RIGHT's (k - 1) heading; the vehicle's heading
     # stays in heading k's sector (planner.headings.courses_deg).
     FORWARD_LEFT = 8

@@ -55,8 +55,9 @@ def table_settings(table: PolicyTable) -> PlanSettings:
     """The ``PlanSettings`` a table's header records (docs/policy-table.md); PlannerError when they are not valid.
 
     Paper tables carry their costs; physical tables their vehicle figures and sampling (``physical``;
-    a physical table without it, from before the key existed, gets the defaults, and ``plan_again``'s
-    action check then tells whether they were the ones used).
+    a physical table without it, from before the key existed, gets the defaults without course
+    offsets, which did not exist then either, and ``plan_again``'s action check then tells whether
+    they were the ones used).
     """
     name = f"table {table.crc32:08x}"
     costs = Costs()
@@ -66,7 +67,8 @@ def table_settings(table: PolicyTable) -> PlanSettings:
         if missing:
             raise PlannerError(f"{name}: header costs lack {', '.join(missing)}")
         costs = Costs(drift=c["drift"], forward=c["forward"], rotate=c["rotate"], glide=c["glide"])
-    physical, vehicle = PhysicalSettings(), VehicleParams()
+    # A physical table from before the header key (or course offsets) existed: planned without offsets.
+    physical, vehicle = PhysicalSettings(course_offsets=False), VehicleParams()
     if table.physical is not None:
         try:
             # A table from before course offsets existed planned with the eight bearings only.

@@ -115,15 +115,15 @@ class FeedbackPilot:
         self._table: PolicyTable | None = None
 
     def command(self, body: Body) -> Setpoint | str:
+        table = self._table_at(body.time_s)
+        if table is not self._table:  # a new plan: decide afresh, as the helm does on a swap (no held cell or manoeuvre)
+            self._table, self._state, self._cell, self._held = table, None, None, None
         if self._held is not None:
             sp, done = self._held
             if not done(body):
                 return sp
             self._held = None
             self._state = None
-        table = self._table_at(body.time_s)
-        if table is not self._table:  # a new plan: decide afresh
-            self._table, self._state = table, None
         look = table.lookup_held(body.lat_deg, body.lon_deg, body.depth_m, body.heading_deg, self._cell, self._margin)
         if look.reason == "at_goal":
             return "arrived"

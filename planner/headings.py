@@ -50,9 +50,11 @@ def bearings_deg(dx_m: NDArray[np.float64], dy_m: float) -> NDArray[np.float64]:
     return np.mod(b, 360.0)
 
 
-# FORWARD_LEFT/RIGHT steer this fraction of the way to the neighbouring heading's bearing: half-way
-# to the edge of heading k's sector, so the vehicle's heading still reads as k (docs/physical-model.md).
-COURSE_FRACTION = 0.25
+# FORWARD_LEFT/RIGHT steer this fraction of the way to the neighbouring heading's bearing: the 24
+# courses are then evenly spaced (a third of each gap between bearings), and each stays inside
+# heading k's sector (which ends half-way), so the vehicle's heading still reads as k
+# (docs/physical-model.md, "Courses").
+COURSE_FRACTION = 1.0 / 3.0
 
 
 def courses_deg(bearings: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -461,7 +461,7 @@ def _physical(doc: _Doc, pl: _Section) -> PhysicalSettings:
     values: dict[str, Any] = {name: ph.integer(name) if ph.has(name) else getattr(d, name) for name in PHYSICAL_INTEGERS}
     values.update({name: ph.number(name, unit=unit) if ph.has(name) else getattr(d, name)
                    for name, unit in PHYSICAL_NUMBERS.items()})
-    values["course_offsets"] = ph.boolean("course_offsets", d.course_offsets)
+    values["course_offsets"] = ph.boolean("course_offsets", d.course_offsets) if ph.has("course_offsets") else d.course_offsets
     try:
         return PhysicalSettings(**values)
     except PlannerError as exc:  # "physical.NAME: message"

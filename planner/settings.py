@@ -106,7 +106,7 @@ class PhysicalSettings:
     min_cost_wh: float = 1e-6  # cost floor: no zero-cost cycles in the expected criterion
     tolerance_wh: float = 1e-9  # policy iteration switches an action only when better by more (< the floor)
     max_iterations: int = 500  # policy iteration's guard
-    # FORWARD_LEFT/RIGHT besides FORWARD: courses a quarter of the way to the neighbouring headings
+    # FORWARD_LEFT/RIGHT besides FORWARD: courses a third of the way to the neighbouring headings
     # (docs/physical-model.md, "Courses"); False plans with the eight grid bearings only.
     course_offsets: bool = True
 

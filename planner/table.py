@@ -171,7 +171,7 @@ class PolicyTable:
 
     def course_deg(self, j: int, k: int, action: Action) -> float:
         """Compass course of a FORWARD action in heading ``k`` of row ``j``: ``bearing_k(j)`` for FORWARD,
-        a quarter of the way to the neighbouring heading's bearing for FORWARD_LEFT/RIGHT."""
+        a third of the way to the neighbouring heading's bearing for FORWARD_LEFT/RIGHT."""
         return self._course_rows[j][k][FORWARD_ACTIONS.index(action)]  # type: ignore[attr-defined]
 
     def cell_centre(self, j: int, i: int) -> tuple[float, float]:
@@ -374,9 +374,13 @@ class PolicyTable:
         water, actions = _unpack_payload(raw, shape)
         if np.any(actions > max(Action)):
             raise TableError(f"{name}: action codes above {int(max(Action))} in the payload")
-        if fields["model"] != "physical" and np.any(actions > Action.UNREACHABLE):
-            raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a "
-                             f"{fields['model']}-model table; only physical plans have them")
+        if np.any(actions > Action.UNREACHABLE):
+            if fields["model"] != "physical":
+                raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a "
+                                 f"{fields['model']}-model table; only physical plans have them")
+            if (fields.get("physical") or {}).get("sampling", {}).get("course_offsets") is False:
+                raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a table "
+                                 "whose header says physical.sampling.course_offsets false")
         if np.any(actions[~water] != Action.UNREACHABLE):
             raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
         table = cls(actions=actions, water=water, **fields)
@@ -492,8 +496,9 @@ def _header_fields(header: Any) -> dict[str, Any]:
         fields["physical"] = {}
         for part in ("vehicle", "sampling"):
             values = _section(_key(physical, part, "physical"), f"physical.{part}")
-            # null: a sampling setting left to the model (max_transition_s); true/false: a switch (course_offsets)
-            fields["physical"][part] = {str(k): v if (v is None or isinstance(v, bool)) and part == "sampling" else
+            # null: a sampling setting left to the model (max_transition_s); true/false: the switch course_offsets
+            fields["physical"][part] = {str(k): _switch(v, f"physical.{part}.{k}") if (part, k) == ("sampling", "course_offsets")
+                                        else None if v is None and part == "sampling" else
                                         _number(v, f"physical.{part}.{k}") for k, v in values.items()}
     return fields
 
@@ -526,6 +531,12 @@ def _float(value: Any, key: str) -> float:
 def _number(value: Any, key: str) -> float | int:
     """A finite number, kept an int when it is one (whole-number settings stay whole)."""
     return value if isinstance(value, int) and not isinstance(value, bool) else _float(value, key)
+
+
+def _switch(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise TableError(f"{key}: expected true or false; got {value!r}")
+    return value
 
 
 def _int(value: Any, key: str) -> int:

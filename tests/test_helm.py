@@ -82,7 +82,7 @@ def test_forward_streams_velocity_along_the_cells_bearing(table):
 
 
 @pytest.mark.parametrize(("action", "dk"), [(Action.FORWARD_LEFT, +1), (Action.FORWARD_RIGHT, -1)])
-def test_course_offset_forward_streams_velocity_a_quarter_of_the_way_to_the_neighbouring_bearing(table, action, dk):
+def test_course_offset_forward_streams_velocity_a_third_of_the_way_to_the_neighbouring_bearing(table, action, dk):
     """Physical plans' FORWARD_LEFT/RIGHT (docs/physical-model.md, "Courses")."""
     state = _state_with(table, Action.FORWARD)
     l, j, _i, k = state
@@ -95,7 +95,7 @@ def test_course_offset_forward_streams_velocity_a_quarter_of_the_way_to_the_neig
     assert isinstance(cmd, VelocityYaw)
     bearing, neighbour = table.bearing_deg(j, k), table.bearing_deg(j, (k + dk) % 8)
     turn = (cmd.yaw_deg - bearing + 180.0) % 360.0 - 180.0
-    assert turn == pytest.approx(0.25 * ((neighbour - bearing + 180.0) % 360.0 - 180.0))
+    assert turn == pytest.approx(((neighbour - bearing + 180.0) % 360.0 - 180.0) / 3.0)
     assert turn < 0 if action == Action.FORWARD_LEFT else turn > 0  # left: counter-clockwise
     assert table.heading_index(j, cmd.yaw_deg) == k  # the vehicle's heading stays in heading k
     assert math.hypot(cmd.north_m_s, cmd.east_m_s) == pytest.approx(CONFIG.cruise_speed_m_s)

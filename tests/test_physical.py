@@ -135,7 +135,7 @@ def test_forward_in_still_water_moves_one_cell_at_cruise_speed(k, axis):
 
 @pytest.mark.parametrize("k", [0, 2, 5])
 def test_course_offset_forwards_in_still_water_follow_their_course(k):
-    """FORWARD_LEFT/RIGHT: a quarter of the way to the neighbouring bearing; the one-spacing end in
+    """FORWARD_LEFT/RIGHT: a third of the way to the neighbouring bearing; the one-spacing end in
     still water is then spacing / (speed x cos of the course's angle to the axis it crosses)."""
     from planner.headings import courses_deg, heading_index
 
@@ -151,8 +151,14 @@ def test_course_offset_forwards_in_still_water_follow_their_course(k):
     for course, neighbour in ((courses[1], left), (courses[2], right)):
         turn = (course - b + 180.0) % 360.0 - 180.0
         gap = (neighbour - b + 180.0) % 360.0 - 180.0
-        assert turn == pytest.approx(0.25 * gap)  # towards the neighbour, a quarter of the way
+        assert turn == pytest.approx(gap / 3.0)  # towards the neighbour, a third of the way
         assert heading_index(float(course), bearings[j]) == k  # the heading still reads as k
+    # The 24 courses of a row are evenly spaced: a third of each gap between neighbouring bearings.
+    row = courses_deg(bearings)[j]
+    for kk in range(8):
+        gap = (float(bearings[j, kk]) - float(bearings[j, (kk + 1) % 8])) % 360.0
+        assert (row[kk, 1] - row[(kk + 1) % 8, 2]) % 360.0 == pytest.approx(gap / 3.0)
+        assert (row[kk, 0] - row[kk, 1]) % 360.0 == pytest.approx(gap / 3.0)
     dx_m, dy_m = grid.cell_size_m()
     for action, course in ((int(Action.FORWARD_LEFT), courses[1]), (int(Action.FORWARD_RIGHT), courses[2])):
         p = pair(model, l, j, i, k, action)

@@ -225,7 +225,19 @@ def test_old_paper_tables_still_load_and_bad_physical_headers_are_refused(physic
     bare = dict(table.header())
     del bare["physical"]
     assert PolicyTable.from_bytes(_pack(bare, table.water, table.actions)).physical is None
+    # Codes above 9 are refused; 8 and 9 too where the header says the plan had no course offsets.
+    too_high = table.actions.copy()
+    too_high[np.nonzero(table.water)[0][0], np.nonzero(table.water)[1][0], np.nonzero(table.water)[2][0], 0] = 10
+    with pytest.raises(TableError, match="action codes above 9"):
+        PolicyTable.from_bytes(_pack(table.header(), table.water, too_high))
+    off = json.loads(json.dumps(table.header()))
+    off["physical"]["sampling"]["course_offsets"] = False
+    with pytest.raises(TableError, match="course_offsets false"):
+        PolicyTable.from_bytes(_pack(off, table.water, table.actions))
+    assert PolicyTable.from_bytes(_pack(off, table.water, paper_actions)).physical["sampling"]["course_offsets"] is False
     for broken, message in (
+        ({"vehicle": {}, "sampling": {"course_offsets": 1}}, "physical.sampling.course_offsets: expected true or false"),
+        ({"vehicle": {}, "sampling": {"min_cost_wh": True}}, "physical.sampling.min_cost_wh: expected a finite number"),
         ({"vehicle": {}}, "physical.sampling"),
         ({"vehicle": {}, "sampling": []}, "physical.sampling: expected a JSON object"),
         ({"vehicle": {"hotel_w": "8"}, "sampling": {}}, "physical.vehicle.hotel_w: expected a finite number"),
