@@ -259,23 +259,27 @@ def run_all(campaign: Campaign, runs: Iterable[tuple[str, int]] | None = None, *
     return replace(campaign, results=results, timings_s={**campaign.timings_s, "runs_s": time.perf_counter() - t})
 
 
-def resolution_change(spec: CampaignSpec, starts: Sequence[Start], methods: Sequence[str] = ("physical-expected", "physical-robust")
+def resolution_change(campaign: Campaign, methods: Sequence[str] = ("physical-expected", "physical-robust")
                       ) -> dict[str, dict[str, float]]:
     """How the start states' predicted cost changes when the grid spacing halves (docs/evaluation.md).
 
     Per method: the median, 90th percentile and largest |V_fine / V - 1| over the starts
-    reachable on both grids, and how many those are.
+    reachable on both grids, and how many those are. The coarse plan is the campaign's own
+    first plan where it has the method.
     """
+    spec = campaign.spec
     forecast = open_forecast(spec.forecast_path, variables=spec.mission.forecast.variables,
                              grid_file=spec.mission.forecast.grid_file)
     fine_spec = replace(spec, grid_scale=2)
     out: dict[str, dict[str, float]] = {}
     for method in methods:
         settings = settings_for(method, spec.mission.settings)
-        coarse = make_plan(request_for(spec, settings, spec.time_index), forecast=forecast)
+        planned = campaign.plans.get(method)
+        coarse = (planned.first if planned is not None and planned.first is not None
+                  else make_plan(request_for(spec, settings, spec.time_index), forecast=forecast))
         fine = make_plan(request_for(fine_spec, settings, spec.time_index), forecast=forecast)
         changes = []
-        for s in starts:
+        for s in campaign.starts:
             a, b = start_state(coarse.table, s), start_state(fine.table, s)
             if a is None or b is None:
                 continue

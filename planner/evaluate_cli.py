@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         note(f"{len(campaign.starts)} starts x {len(methods)} methods, {runner.describe()}")
         campaign = run_all(campaign, runner=runner)
     summaries = summarise(campaign.results, methods)
-    resolution = resolution_change(spec, campaign.starts) if args.resolution else None
+    resolution = resolution_change(campaign) if args.resolution else None
     print(format_table(summaries))
     if resolution is not None:
         for m, r in resolution.items():

@@ -507,7 +507,7 @@ def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  #
     """Flatten the per-cell samples into per-(state, action) outcome lists, states in index order."""
     L, ny, nx = water.shape
     n_states = 8 * L * ny * nx
-    n_actions = 8 if count.shape[1] > 11 else 6
+    n_actions = 8 if count.shape[1] > N_CHANNELS_BEARINGS else 6  # with course offsets: FORWARD_LEFT/RIGHT too
     n_pairs = 0
     n_out = 0
     for s in range(n_states):  # pass 1: sizes

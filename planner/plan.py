@@ -199,13 +199,23 @@ def sample_member(task: MemberTask) -> SampleStats:
     return sample_transitions(uf, vf, task.grid, task.settings, refine=task.refine, goal_mask=task.goal_mask)
 
 
+def open_step(request: PlanRequest, ref: MemberRef) -> tuple[Forecast, int]:
+    """A member's forecast opened at the request's step only, and that step's index in the file.
+
+    The time axis alone first (cheap for any file size), then only that step, the member and,
+    with a bbox, the region around it (docs/forecasts-large.md).
+    """
+    index = choose_time_index(forecast_times(ref.path, variables=request.variables), request)
+    forecast = open_forecast(ref.path, variables=request.variables, grid_file=request.grid_file,
+                             member=ref.member, bbox=request.bbox, time_index=index)
+    return forecast, index
+
+
 def member_tasks(request: PlanRequest, *, first: Forecast | None = None) -> list[MemberTask]:
     """The sampling tasks of a physical plan over the request's members (the first member sets grid and step)."""
     refs = members_of(request)
     if first is None:
-        index = choose_time_index(forecast_times(refs[0].path, variables=request.variables), request)
-        first = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
-                              member=refs[0].member, bbox=request.bbox, time_index=index)
+        first, index = open_step(request, refs[0])
     elif first.window is not None and first.window.time_index is not None:
         index = first.window.time_index  # a one-step window (open_forecast(time_index=)): its step
     else:
@@ -241,11 +251,7 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     if len(refs) > 1:
         return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)
     if forecast is None:
-        # The time axis alone first (cheap for any file size), then only that step, the member
-        # and, with a bbox, the region around it (docs/forecasts-large.md).
-        index = choose_time_index(forecast_times(refs[0].path, variables=request.variables), request)
-        forecast = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
-                                 member=refs[0].member, bbox=request.bbox, time_index=index)
+        forecast, index = open_step(request, refs[0])
     else:
         index = choose_time_index(forecast, request)
     step = forecast.step_index(index)  # index into forecast.time_s: 0 for a one-step window
@@ -295,9 +301,7 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
                            f"outcomes; the paper model has none): give --model physical or one forecast")
     timings: dict[str, float] = {}
     t = time.perf_counter()
-    index = choose_time_index(forecast_times(refs[0].path, variables=request.variables), request)
-    first = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
-                          member=refs[0].member, bbox=request.bbox, time_index=index)
+    first, index = open_step(request, refs[0])
     tasks = member_tasks(request, first=first)
     timings["load_s"] = time.perf_counter() - t
     timings["resample_s"] = 0.0  # in the member tasks

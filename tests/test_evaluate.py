@@ -19,7 +19,17 @@ import numpy as np
 import pytest
 
 from planner.actions import Action
-from planner.campaign import CampaignSpec, make_plans, prepare, request_for, run_all, run_one, settings_for, start_state
+from planner.campaign import (
+    CampaignSpec,
+    make_plans,
+    prepare,
+    request_for,
+    resolution_change,
+    run_all,
+    run_one,
+    settings_for,
+    start_state,
+)
 from planner.cli import main
 from planner.double_gyre import DoubleGyreSettings, write_gyre
 from planner.errors import PlannerError
@@ -564,3 +574,26 @@ def test_feedback_pilot_drifts_where_the_plan_has_no_action_and_resumes_after(ta
     assert resumed > 0 and all(sp == drift for _body, sp in seen[:resumed])
     body = seen[resumed][0]
     assert cut.locate(body.lat_deg, body.lon_deg, body.depth_m)[1:] == (j, i + di)  # carried out of the cut cell
+
+
+def test_resolution_change_compares_the_campaigns_plans_with_plans_at_half_the_spacing(gyre, mission):
+    """``--resolution``: the start states' predictions on the campaign's grid against a grid of half the spacing."""
+    spec = _spec(mission, gyre["steady"], World.load(gyre["truth"]), n_starts=12, seed=3,
+                 methods=("physical-expected", "naive"))
+    campaign = prepare(spec)
+    out = resolution_change(campaign)
+    assert set(out) == {"physical-expected", "physical-robust"}
+    expected = campaign.plans["physical-expected"].first
+    fine = make_plan(request_for(replace(spec, grid_scale=2), settings_for("physical-expected", mission.settings), 0))
+    assert fine.grid.nx == 2 * expected.grid.nx - 1 and fine.grid.ny == 2 * expected.grid.ny - 1
+    changes = []
+    for s in campaign.starts:  # by hand, from the campaign's own coarse plan
+        a, b = start_state(expected.table, s), start_state(fine.table, s)
+        va, vb = float(expected.solution.value_wh[a]), float(fine.solution.value_wh[b])
+        if math.isfinite(va) and math.isfinite(vb) and va > 0:
+            changes.append(abs(vb / va - 1.0))
+    r = out["physical-expected"]
+    assert r["starts"] == len(changes) > 0
+    assert r["median"] == pytest.approx(float(np.median(changes))) and r["max"] == pytest.approx(max(changes))
+    assert r["median"] < 0.1  # issue 8's target, here over the starts
+    assert out["physical-robust"]["starts"] > 0
