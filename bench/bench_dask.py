@@ -28,10 +28,10 @@ from distributed import Client, LocalCluster  # noqa: E402
 
 from planner.cluster import local_cluster  # noqa: E402
 
-from planner.campaign import CampaignSpec, prepare, run_all  # noqa: E402
+from planner.shore.evaluation.campaign import CampaignSpec, prepare, run_all  # noqa: E402
 from planner.cluster import DaskRunner, InProcess  # noqa: E402
-from planner.double_gyre import DoubleGyreSettings, write_gyre  # noqa: E402
-from planner.mission import load_mission  # noqa: E402
+from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre  # noqa: E402
+from planner.contract.mission import load_mission  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -99,15 +99,15 @@ def main() -> int:
 
 
 def _ensemble(args: argparse.Namespace, d: Path) -> None:
-    """Sampling an ensemble's members as tasks (planner.plan.make_plan's member tasks)."""
+    """Sampling an ensemble's members as tasks (planner.pipeline.make_plan's member tasks)."""
     try:
-        from planner.plan import member_tasks, sample_member
+        from planner.pipeline import member_tasks, sample_member
     except ImportError:
         print("ensemble sampling: not available in this version")
         return
-    from planner.ensemble import write_gyre_ensemble
-    from planner.plan import PlanRequest
-    from planner.settings import Goal, PlanSettings
+    from planner.forecast.synthetic.ensemble import write_gyre_ensemble
+    from planner.pipeline import PlanRequest
+    from planner.contract.settings import Goal, PlanSettings
 
     mission = load_mission(d / "m.yaml")
     path = write_gyre_ensemble(d / "ens.nc", DoubleGyreSettings(peak_speed_m_s=1.5), members=args.members, seed=1)

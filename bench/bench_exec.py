@@ -34,10 +34,10 @@ sys.path.insert(0, str(REPO))
 from executive import mavlink_bridge as bridge  # noqa: E402
 from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
-from executive.state import SubMode  # noqa: E402
-from planner.table import PolicyTable  # noqa: E402
+from planner.contract.modes import SubMode  # noqa: E402
+from planner.contract.table import PolicyTable  # noqa: E402
 from vehicle_sim.cli import wait_ready  # noqa: E402
-from vehicle_sim.demo import stop_process  # noqa: E402
+from planner.shore.demo import stop_process  # noqa: E402
 
 LRAUV = [sys.executable, "-m", "planner.cli"]
 DEMO_START = "-117.96,33.34"  # as in the Makefile

@@ -37,7 +37,7 @@ sys.path.insert(0, str(REPO))
 
 from executive.helm import HelmState  # noqa: E402
 from executive.state import VehicleState  # noqa: E402
-from planner.table import PolicyTable  # noqa: E402
+from planner.contract.table import PolicyTable  # noqa: E402
 from tests.mavfuzz import (  # noqa: E402
     ExecutiveHarness,
     autopilot_frames,
@@ -65,7 +65,7 @@ class Memory:
 
 
 def table_and_truth(work: Path) -> tuple[PolicyTable, Path]:
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
     from tests.helpers import plan_for
 
     truth = write_synthetic(work / "truth.nc", SyntheticSettings(seed=0, hours=24))

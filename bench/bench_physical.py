@@ -27,10 +27,10 @@ def main() -> None:
     args = parser.parse_args()
 
     from planner.forecast import open_forecast
-    from planner.mission import load_mission
-    from planner.plan import PlanRequest, make_plan
-    from planner.settings import Goal
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.contract.mission import load_mission
+    from planner.pipeline import PlanRequest, make_plan
+    from planner.contract.settings import Goal
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     mission = load_mission(REPO / "missions" / "demo-physical.yaml")
     with tempfile.TemporaryDirectory() as tmp:

@@ -32,11 +32,12 @@ def run_case(nx: int, ny: int, criterion: str, repeat: int) -> dict:
     """In a child process: sample the field, then time build_transitions + solve."""
     import numpy as np
 
-    from planner.grid import BBox, Grid
-    from planner.settings import Goal, PlanSettings
-    from planner.solve import solve
-    from planner.synthetic import SyntheticSettings, current_at
-    from planner.transitions import build_transitions
+    from planner.grid import Grid
+    from planner.contract.geodesy import BBox
+    from planner.contract.settings import Goal, PlanSettings
+    from planner.paper.solve import solve
+    from planner.forecast.synthetic.scb import SyntheticSettings, current_at
+    from planner.paper.transitions import build_transitions
 
     syn = SyntheticSettings()
     grid = Grid.from_bbox(
@@ -76,7 +77,7 @@ def child(args: list[str], env: dict | None = None) -> dict:
 
 def startup(cache_dir: str | None) -> float:
     """Wall time of a whole ``lrauv plan`` process on the paper grid."""
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     with tempfile.TemporaryDirectory() as tmp:
         fc = write_synthetic(Path(tmp) / "f.nc", SyntheticSettings(hours=2))
@@ -106,7 +107,7 @@ def main() -> None:
     startup(None)
     warm = startup(None)
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import planner.solve"], check=True)
+    subprocess.run([sys.executable, "-c", "import planner.paper.solve"], check=True)
     imports = time.perf_counter() - t0
     print(f"start-up: `lrauv plan` on the paper grid, whole process: {warm:.2f} s with a warm numba cache, "
           f"{cold:.2f} s with an empty cache (compile); importing the solver: {imports:.2f} s\n")

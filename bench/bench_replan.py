@@ -53,12 +53,12 @@ os.environ.setdefault("MAVLINK20", "1")
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from executive import plans  # noqa: E402
+from executive import goal_tables
 from executive.loop import ExecConfig, Executive  # noqa: E402
 from executive.state import Phase  # noqa: E402
-from planner.mission import load_mission  # noqa: E402
-from planner.plan import PlanRequest, make_plan  # noqa: E402
-from planner.synthetic import SyntheticSettings, write_synthetic  # noqa: E402
+from planner.contract.mission import load_mission  # noqa: E402
+from planner.pipeline import PlanRequest, make_plan  # noqa: E402
+from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic  # noqa: E402
 from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
@@ -192,7 +192,7 @@ def run_size(states: int, nx: int, ny: int, work: Path, truth: Path, issue_files
     sim_thread = threading.Thread(target=sim.run, kwargs={"stop_event": sim_stop}, daemon=True)
     config = ExecConfig(link=f"udpout:127.0.0.1:{sim.port}", log_path=folder / "exec.mcap", gcs_link=None,
                         mission_path=mission_path, watch_dir=inbox, work_dir=folder / "work", max_wall_s=170.0)
-    ex = Executive(config, plans.MissionPlan(goals=mission.goals, tables=(table,)))
+    ex = Executive(config, goal_tables.MissionPlan(goals=mission.goals, tables=(table,)))
     probe = Probe(ex)
     ex_thread = threading.Thread(target=ex.run, args=(ex_stop,), daemon=True)
     rows: list[dict] = []

@@ -9,7 +9,7 @@ in a child process on the forecast step of the vehicle's UTC time and swaps the
 new table in. Every ``--sample-s`` wall seconds the script records each process's
 resident memory (``/proc/PID/status`` VmRSS) and the log's size on disk.
 
-Afterwards it reads the log (``executive.divelog``/``executive.dive``) and prints,
+Afterwards it reads the log (``planner.shore.replay.divelog``/``planner.shore.replay.dive``) and prints,
 per vehicle day: decisions per vehicle hour, log bytes, and the executive's RSS at
 the end of that day, plus the replans. The figures go into docs/benchmarks.md.
 
@@ -30,9 +30,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from executive.dive import load_dive  # noqa: E402
-from executive.divelog import open_dive  # noqa: E402
-from vehicle_sim.demo import stop_process, wait_ready  # noqa: E402
+from planner.shore.replay.dive import load_dive  # noqa: E402
+from planner.shore.replay.divelog import open_dive  # noqa: E402
+from planner.shore.demo import stop_process, wait_ready  # noqa: E402
 
 LRAUV = [sys.executable, "-m", "planner.cli"]
 START = "-118.20,33.62"  # north-west of the region, far from the goal

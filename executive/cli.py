@@ -15,8 +15,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from executive.helm import HelmConfig
-from planner.errors import PlannerError
-from planner.table import PolicyTable, read_table_file
+from planner.contract.errors import ExecutiveError
+from planner.contract.table import PolicyTable, read_table_file
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -76,7 +76,7 @@ def _exec(args: argparse.Namespace) -> int:
     from executive.loop import ExecConfig, Executive
     from executive.signing import load_key
 
-    from executive import durable, plans
+    from executive import durable, goal_tables
 
     resumed = None
     if args.resume is not None:
@@ -84,7 +84,7 @@ def _exec(args: argparse.Namespace) -> int:
         args.mission = args.mission or resumed.mission_path
         args.state_dir = args.state_dir or args.resume
     elif not args.table:
-        raise PlannerError("exec: no table: give --table TABLE.lrpt (or --resume STATE_DIR after a crash)")
+        raise ExecutiveError("exec: no table: give --table TABLE.lrpt (or --resume STATE_DIR after a crash)")
     paths = args.table or []
     blobs = [read_table_file(p) for p in paths]
     tables = [PolicyTable.from_bytes(data, name=str(p)) for p, data in zip(paths, blobs)]
@@ -118,25 +118,25 @@ def _exec(args: argparse.Namespace) -> int:
             key = load_key(key_file=sg.key_file, passphrase_env=sg.passphrase_env, where=sg.where)
     else:
         if len(tables) > 1:
-            raise PlannerError("--table: several tables need a --mission to say the order of their goals")
+            raise ExecutiveError("--table: several tables need a --mission to say the order of their goals")
         if args.on_arrival:
             helm = replace(helm, on_arrival=args.on_arrival)
-        plan = plans.single(tables[0], on_arrival=helm.on_arrival)
+        plan = goal_tables.single(tables[0], on_arrival=helm.on_arrival)
     if args.replan_period_h is not None:
         if not (math.isfinite(args.replan_period_h) and args.replan_period_h > 0):
-            raise PlannerError(f"--replan-period-h: expected a positive number of hours; got {args.replan_period_h}")
+            raise ExecutiveError(f"--replan-period-h: expected a positive number of hours; got {args.replan_period_h}")
         period_s = args.replan_period_h * 3600.0
     if watch is not None and not watch.is_dir():
-        raise PlannerError(f"--watch {watch}: not a directory")
+        raise ExecutiveError(f"--watch {watch}: not a directory")
     if not (math.isfinite(args.telemetry_hz) and 0.1 <= args.telemetry_hz <= 50):
-        raise PlannerError(f"--telemetry-hz: expected 0.1 to 50 Hz; got {args.telemetry_hz}")
+        raise ExecutiveError(f"--telemetry-hz: expected 0.1 to 50 Hz; got {args.telemetry_hz}")
     fast = {"GLOBAL_POSITION_INT", "ATTITUDE"}
     rates = tuple((name, 1.0 / args.telemetry_hz if name in fast else s) for name, s in helm.rates)
     helm = replace(helm, rates=rates)
     for name in ("linger_s", "max_wall_s", "max_vehicle_h"):
         value = getattr(args, name)
         if value is not None and not (math.isfinite(value) and value >= 0):
-            raise PlannerError(f"--{name.replace('_', '-')}: expected a non-negative number; got {value}")
+            raise ExecutiveError(f"--{name.replace('_', '-')}: expected a non-negative number; got {value}")
     log_path = args.log or Path("out") / time.strftime("exec-%Y%m%dT%H%M%SZ.mcap", time.gmtime())
     recovered = None
     if resumed is not None:
@@ -163,7 +163,7 @@ def _exec(args: argparse.Namespace) -> int:
     try:
         executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta)
     except OSError as exc:
-        raise PlannerError(f"--link {args.link} or --gcs {args.gcs}: cannot open: {exc}") from None
+        raise ExecutiveError(f"--link {args.link} or --gcs {args.gcs}: cannot open: {exc}") from None
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
@@ -203,7 +203,7 @@ def _resume_log(previous: Path | None, given: Path | None) -> tuple[Path, str | 
     note = None
     if previous is not None and previous.exists():
         if given is not None and given.resolve() == previous.resolve():
-            raise PlannerError(f"--log {given}: that is the killed run's log; give the resumed run another file")
+            raise ExecutiveError(f"--log {given}: that is the killed run's log; give the resumed run another file")
         if is_complete(previous):
             note = f"{previous} (complete)"
         else:
@@ -221,7 +221,7 @@ def _resume_log(previous: Path | None, given: Path | None) -> tuple[Path, str | 
 
 
 def _load_mission(mission_path: Path):  # type: ignore[no-untyped-def]
-    from planner.mission import load_mission
+    from planner.contract.mission import load_mission
 
     return load_mission(mission_path)
 
@@ -238,15 +238,15 @@ def _helm_figures(m) -> HelmConfig:  # type: ignore[no-untyped-def]
 
 def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTable], on_arrival: str | None):  # type: ignore[no-untyped-def]
     """The helm's figures and the goal list from the mission; each table must serve one of its goals."""
-    from executive import plans
+    from executive import goal_tables
 
     m = _load_mission(mission_path)
     goals = m.goals
     if on_arrival:  # the mission's end; goals before it keep theirs (``next``)
         goals = (*goals[:-1], replace(goals[-1], on_arrival=on_arrival))  # type: ignore[arg-type]
-    plan = plans.assign(goals, zip(map(str, paths), tables), str(mission_path))
+    plan = goal_tables.assign(goals, zip(map(str, paths), tables), str(mission_path))
     if plan.table is None:
         first = goals[0].goal
-        raise PlannerError(f"--table: none is for goals[0] of {mission_path} ({first.lon_deg:g}, {first.lat_deg:g},"
+        raise ExecutiveError(f"--table: none is for goals[0] of {mission_path} ({first.lon_deg:g}, {first.lat_deg:g},"
                            f" {first.depth_m:g} m): plan it with `lrauv plan {mission_path}`")
     return replace(_helm_figures(m), on_arrival=goals[0].on_arrival), plan, m

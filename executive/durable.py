@@ -4,7 +4,7 @@ A state directory holds ``state.json`` (the goals, which table serves each, the
 active goal, the log being written) and the tables themselves under
 ``tables/policy-CRC.lrpt``. The loop saves it at start and at every plan swap;
 tables are written before the state that names them, each file atomically
-(``planner.atomic``), so a kill at any moment leaves the previous state or the
+(``planner.contract.atomic``), so a kill at any moment leaves the previous state or the
 new one, never half of either. ``lrauv exec --resume DIR`` loads it back
 (``load``), recovers the killed log up to its last complete record
 (``executive.recorder.recover``) and goes on with a new log.
@@ -22,12 +22,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from executive.plans import MissionPlan
-from planner.atomic import write_atomic
-from planner.errors import PlannerError
-from planner.mission import MissionGoal
-from planner.settings import Goal
-from planner.table import PolicyTable
+from executive.goal_tables import MissionPlan
+from planner.contract.atomic import write_atomic
+from planner.contract.errors import ExecutiveError
+from planner.contract.mission import MissionGoal
+from planner.contract.settings import Goal
+from planner.contract.table import PolicyTable
 
 __all__ = ["STATE_FILE", "Resumed", "load", "save"]
 
@@ -77,23 +77,23 @@ def save(state_dir: Path, plan: MissionPlan, blobs: Mapping[int, bytes], *, log_
 
 
 def load(state_dir: Path) -> Resumed:
-    """Read a state directory back; ``PlannerError`` names the file and what is wrong."""
+    """Read a state directory back; ``ExecutiveError`` names the file and what is wrong."""
     path = state_dir / STATE_FILE
     try:
         state = json.loads(path.read_text())
     except FileNotFoundError:
-        raise PlannerError(f"{path}: no saved state here (was the executive run with --state-dir {state_dir}?)") from None
+        raise ExecutiveError(f"{path}: no saved state here (was the executive run with --state-dir {state_dir}?)") from None
     except (OSError, ValueError) as exc:
-        raise PlannerError(f"{path}: cannot read the saved state: {exc}") from None
+        raise ExecutiveError(f"{path}: cannot read the saved state: {exc}") from None
     try:
         return _parse(state, state_dir, path)
     except (KeyError, TypeError, ValueError) as exc:
-        raise PlannerError(f"{path}: not a saved executive state ({type(exc).__name__}: {exc})") from None
+        raise ExecutiveError(f"{path}: not a saved executive state ({type(exc).__name__}: {exc})") from None
 
 
 def _parse(state: Mapping[str, Any], state_dir: Path, path: Path) -> Resumed:
     if state.get("version") != _VERSION:
-        raise PlannerError(f"{path}: state version {state.get('version')!r}; this executive reads version {_VERSION}")
+        raise ExecutiveError(f"{path}: state version {state.get('version')!r}; this executive reads version {_VERSION}")
     goals = tuple(MissionGoal(goal=Goal(lon_deg=float(g["lon_deg"]), lat_deg=float(g["lat_deg"]),
                                         depth_m=float(g["depth_m"]), radius_cells=int(g["radius_cells"])),
                               on_arrival=g["on_arrival"]) for g in state["goals"])
@@ -107,17 +107,17 @@ def _parse(state: Mapping[str, Any], state_dir: Path, path: Path) -> Resumed:
         try:
             data = file.read_bytes()
         except OSError as exc:
-            raise PlannerError(f"{file}: a table the saved state names cannot be read: {exc.strerror or exc}") from None
+            raise ExecutiveError(f"{file}: a table the saved state names cannot be read: {exc.strerror or exc}") from None
         table = PolicyTable.from_bytes(data, name=str(file))
         if name != _table_name(table):
-            raise PlannerError(f"{file}: its CRC is {table.crc32:08x}, not the one in its name")
+            raise ExecutiveError(f"{file}: its CRC is {table.crc32:08x}, not the one in its name")
         tables.append(table)
         blobs[table.crc32] = data
     index = int(state["goal_index"])
     if not (0 <= index < len(goals)) or len(tables) != len(goals):
-        raise PlannerError(f"{path}: goal_index {index} and {len(tables)} tables do not fit {len(goals)} goals")
+        raise ExecutiveError(f"{path}: goal_index {index} and {len(tables)} tables do not fit {len(goals)} goals")
     if tables[index] is None:
-        raise PlannerError(f"{path}: the active goal {index} has no table yet; give one with --table")
+        raise ExecutiveError(f"{path}: the active goal {index} has no table yet; give one with --table")
     return Resumed(plan=MissionPlan(goals=goals, tables=tuple(tables), index=index), blobs=blobs,
                    log_path=Path(state["log"]) if state.get("log") else None,
                    mission_path=Path(state["mission"]) if state.get("mission") else None,

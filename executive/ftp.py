@@ -21,7 +21,7 @@ write are poisoned instead: closing them discards the data without calling ``acc
 
 What a client learns of a refusal depends on the client:
 
-* ``planner.ftp_client.put_file`` raises ``FtpUploadError`` ("refused by the vehicle").
+* ``planner.shore.ftp_client.put_file`` raises ``FtpUploadError`` ("refused by the vehicle").
 * pymavlink's ``MAVFTP.cmd_put`` (2.4.50) does not notice. After the last WriteFile
   ACK it calls its progress/put callback with the full length ("Put N bytes" is
   logged), then sends TerminateSession and waits for the reply with

@@ -42,9 +42,9 @@ from executive.state import (
     VelocityYaw,
 )
 from executive.geofence import inside
-from planner.actions import FORWARD_ACTIONS, Action
-from planner.settings import BreachAction, OnArrival
-from planner.table import CELL_MARGIN, PolicyTable
+from planner.contract.actions import FORWARD_ACTIONS, Action
+from planner.contract.settings import BreachAction, OnArrival
+from planner.contract.table import CELL_MARGIN, PolicyTable
 
 # The mode for each on_breach action (ArduSub: SURFACE ascends, ALT_HOLD holds depth without
 # horizontal thrust, GUIDED holds a position).

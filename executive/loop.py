@@ -10,7 +10,7 @@ simulator speedup.
 Uploads (issue 3) arrive on the ground-station link (``gcs_link``) or through the
 autopilot: goals by the mission protocol (``executive.mission_protocol``), tables and
 forecasts by MAVLink FTP (``executive.ftp``). New tables, uploaded or planned onboard
-(``executive.replanner``), are checked (``executive.plans``) and swapped in whole just
+(``executive.replanner``), are checked (``executive.goal_tables``) and swapped in whole just
 before a decision; a refused one is logged and never replaces the running plan.
 """
 
@@ -24,19 +24,19 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import durable, plans
+from executive import durable, goal_tables
 from executive import signing
 from executive.clock import VehicleClock
 from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, step, swapped
 from executive.latency import LatencyHistogram
 from executive.mission_protocol import addressed_to
-from executive.plans import MissionPlan
+from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
 from executive.replanner import ForecastWatcher, PlanJob, PlanResult, Replanner
 from executive.state import Command, Event, Phase, VehicleState
 from executive.uploads import Uploads
-from planner.errors import PlannerError
-from planner.table import PolicyTable
+from planner.contract.errors import LrauvError
+from planner.contract.table import PolicyTable
 
 _POLL_S = 0.05  # longest wait in select (wall); heartbeats and link checks run at least this often
 _DRAIN_BUDGET_S = 0.01  # longest burst of input handling (wall) before time-driven work gets its turn
@@ -97,7 +97,7 @@ class Executive:
 
         self.config = config
         if isinstance(table, PolicyTable):
-            table = plans.single(table, on_arrival=config.helm.on_arrival)
+            table = goal_tables.single(table, on_arrival=config.helm.on_arrival)
         self.plan: MissionPlan | None = table
         self.helm_config = self._config_for(self.plan)
         # Signing (executive.signing): one stream table for both links, as ArduPilot's; refusals by verdict.
@@ -145,7 +145,7 @@ class Executive:
         self._latest_forecast: Path | None = None
         self._last_plan_s: float | None = None
         self._asked_next: int | None = None
-        # What the decision audit (executive.audit) needs to run the helm again: its settings,
+        # What the decision audit (planner.shore.replay.audit) needs to run the helm again: its settings,
         # the active goal and every table's exact bytes.
         self.recorder.metadata("helm", {"config": self.helm_config.to_json(),
                                         "goal_index": str(self.plan.index if self.plan is not None else 0)})
@@ -415,7 +415,7 @@ class Executive:
             self._arrival_s, self._asked_next = None, None  # a new mission
         record = {"time_s": now_s, "reason": "swapped", **note, "goal_index": new.index,
                   "on_arrival": self.helm_config.on_arrival, "helm_reset": reset,
-                  "previous": plans.identity(old_table), **plans.identity(new.table)}
+                  "previous": goal_tables.identity(old_table), **goal_tables.identity(new.table)}
         if new.table is not None:
             record["forecast"] = {"identity": new.table.forecast_identity, "time": new.table.forecast_time}
         self.swaps.append(record)
@@ -429,7 +429,7 @@ class Executive:
                 notify: bool = True) -> str:
         record: dict[str, Any] = {"time_s": now_s, "reason": "refused", "refusal": f"{what}: {reason}"}
         if table is not None:  # a file that is no table has no identity to log
-            record.update(plans.identity(table))
+            record.update(goal_tables.identity(table))
         self._log(self.recorder.write, Topic.POLICY, now_s, record)
         event = Event("warning", f"refused {what}: {reason}; the running plan goes on")
         if notify:
@@ -446,7 +446,7 @@ class Executive:
             self.staged = None
             self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted: the running goals, kept"))
             return None
-        staged = plans.adopt(tuple(goals), base)
+        staged = goal_tables.adopt(tuple(goals), base)
         self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted"))
         if staged.table is not None:
             self.staged = None
@@ -469,7 +469,7 @@ class Executive:
             return self._refuse(now_s, path, "expected a policy table (*.lrpt) or a forecast (*.nc)")
         try:
             table = PolicyTable.from_bytes(data, name=path)  # CRC, version and shape
-        except PlannerError as exc:
+        except LrauvError as exc:
             return self._refuse(now_s, path, str(exc))
         return self._offer(now_s, table, data, {"source": f"upload {path}"})
 
@@ -484,12 +484,12 @@ class Executive:
             candidates.append(("running", base))
         reasons = []
         for which, plan in candidates:
-            verdict = plans.check_table(table, plan)
+            verdict = goal_tables.check_table(table, plan)
             if not verdict.accepted:
                 reasons.append(verdict.reason)
                 continue
             assert verdict.goal_index is not None
-            new = plans.with_table(plan, verdict.goal_index, table)
+            new = goal_tables.with_table(plan, verdict.goal_index, table)
             self._record_policy(table, data, "received", now_s=now_s)
             if which == "staged":
                 if new.table is None:
@@ -507,7 +507,7 @@ class Executive:
     def _accept_forecast(self, now_s: float, name: str, data: bytes) -> str | None:
         if self.replanner is None:
             return self._refuse(now_s, name, "this executive has no mission to plan onboard (lrauv exec --mission)")
-        from planner.atomic import write_atomic
+        from planner.contract.atomic import write_atomic
 
         path = write_atomic(self._work_dir / "forecasts" / name, data)
         self._new_forecast(now_s, path, time.monotonic())
@@ -541,7 +541,7 @@ class Executive:
             return
         try:
             table = PolicyTable.from_bytes(result.table_bytes, name="onboard plan")
-        except PlannerError as exc:
+        except LrauvError as exc:
             self._refuse(now_s, f"onboard plan ({job.reason})", str(exc))
             return
         note = {"source": f"onboard plan ({job.reason})", "latency_s": round(result.latency_s, 3),

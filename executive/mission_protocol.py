@@ -49,8 +49,8 @@ from dataclasses import dataclass, field
 from enum import IntEnum, unique
 from typing import Any, Union
 
-from planner.errors import PlannerError
-from planner.waypoints import MAX_GOALS, MissionItem, MissionResult, to_e7
+from planner.contract.errors import LrauvError
+from planner.contract.waypoints import MAX_GOALS, MissionItem, MissionResult, to_e7
 
 __all__ = [
     "RECEIVER_MESSAGES", "STATUSTEXT_LEN", "Ack", "Count", "Item", "MissionDownloader", "MissionReceiver",
@@ -190,7 +190,7 @@ class MissionReceiver:
 
     ``accept(items)`` is called once with the complete list (``()`` to clear)
     and returns None to accept or a reason string to refuse with MAV_MISSION_ERROR.
-    Raising ``PlannerError`` refuses with its message (and the ``result`` of a
+    Raising ``LrauvError`` refuses with its message (and the ``result`` of a
     ``WaypointError``); any other exception refuses with MAV_MISSION_ERROR and the
     exception's text (and is logged), so a bug in the hook never breaks the protocol.
     """
@@ -310,7 +310,7 @@ class MissionReceiver:
         """``accept``'s verdict; never raises: an exception from the hook is a refusal."""
         try:
             reason = self._accept(items)
-        except PlannerError as exc:
+        except LrauvError as exc:
             return _refusal_result(exc), str(exc)
         except Exception as exc:  # the hook's bug must not take the protocol down
             log.warning("mission accept hook raised; refusing the mission", exc_info=True)
@@ -320,7 +320,7 @@ class MissionReceiver:
         return MissionResult.ERROR, str(reason)
 
 
-def _refusal_result(exc: PlannerError) -> MissionResult:
+def _refusal_result(exc: LrauvError) -> MissionResult:
     """A ``WaypointError``'s own result; MAV_MISSION_ERROR for any other error (or a result that is not a refusal)."""
     try:
         result = MissionResult(getattr(exc, "result", MissionResult.ERROR))

@@ -38,8 +38,8 @@ from mcap.records import Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
-from planner.atomic import atomic_target
-from planner.errors import PlannerError
+from planner.contract.atomic import atomic_target
+from planner.contract.errors import ExecutiveError
 
 __all__ = ["LogError", "LogLevel", "RecordStream", "Recorder", "Recovery", "Topic", "check_head", "is_complete", "read_messages", "recover"]
 
@@ -58,7 +58,7 @@ _INDEXES = IndexType.ALL
 _NS_PER_S = 1_000_000_000
 
 
-class LogError(PlannerError):
+class LogError(ExecutiveError):
     """An MCAP log that cannot be written, read or recovered; the message names the file."""
 
 

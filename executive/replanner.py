@@ -6,7 +6,7 @@ written is not planned on (writers should still write atomically, as ``lrauv for
 does). ``Replanner`` runs ``lrauv plan`` for one goal at a time in a child process
 at a lower CPU priority, so the executive's loop never waits for the solver and never
 imports it (the vehicle side stays light). The loop polls ``Replanner.poll`` and swaps the new
-table in at a decision boundary (``executive.plans``, ``executive.loop``).
+table in at a decision boundary (``executive.goal_tables``, ``executive.loop``).
 
 One job runs at a time; a request made while one runs replaces any request still waiting,
 so a burst of forecasts plans only the newest.
@@ -20,7 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from planner.mission import MissionGoal
+from planner.contract.mission import MissionGoal
 
 _STDERR_TAIL = 400  # characters of the planner's error kept for the log
 # The child lowers its own priority, so that the solver never takes the CPU from the control

@@ -35,7 +35,7 @@ from enum import Enum, unique
 from pathlib import Path
 
 from executive.mission_protocol import RECEIVER_MESSAGES
-from planner.errors import PlannerError
+from planner.contract.errors import ExecutiveError
 
 KEY_BYTES = 32
 EPOCH_UNIX_S = 1_420_070_400  # 2015-01-01T00:00:00Z, the signing epoch
@@ -56,7 +56,7 @@ GUARDED_MESSAGES = RECEIVER_MESSAGES | {"FILE_TRANSFER_PROTOCOL"} | COMMANDS
 UNSIGNED_ALLOWED = frozenset({"RADIO_STATUS", "RADIO"})  # a telemetry radio's own (ArduPilot's accept_list, MAVProxy's)
 
 
-class SigningError(PlannerError):
+class SigningError(ExecutiveError):
     """A signing key that cannot be used: the message names where it was configured."""
 
 

@@ -7,18 +7,10 @@ objects into messages; everything between works on these.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum, IntEnum, unique
+from enum import Enum, unique
+
+from planner.contract.modes import SubMode
 from typing import Literal
-
-
-@unique
-class SubMode(IntEnum):
-    """ArduSub flight modes (HEARTBEAT.custom_mode), as observed on ArduSub SITL."""
-
-    ALT_HOLD = 2
-    GUIDED = 4
-    SURFACE = 9
-    MANUAL = 19
 
 
 @unique

@@ -15,8 +15,8 @@ from typing import Any
 from executive import mavlink_bridge as bridge
 from executive import mission_protocol as mp
 from executive.ftp import FtpServer
-from planner.errors import PlannerError
-from planner.waypoints import items_to_goals
+from planner.contract.errors import LrauvError
+from planner.contract.mission import items_to_goals
 
 class Uploads:
     """Mission-protocol and FTP servers behind one ``handle``; replies go back on the caller's link."""
@@ -34,7 +34,7 @@ class Uploads:
     def _accept_items(self, items: tuple[mp.MissionItem, ...]) -> str | None:
         try:
             goals = items_to_goals(items)
-        except PlannerError as exc:  # the protocol answers with the error's own MAV_MISSION_RESULT
+        except LrauvError as exc:  # the protocol answers with the error's own MAV_MISSION_RESULT
             self._refused("mission", str(exc))
             raise
         return self._accept_goals(goals)

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
-from planner.errors import PlannerError
+from planner.contract.errors import PlannerError
 
 T = TypeVar("T")
 R = TypeVar("R")

@@ -7,30 +7,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.errors import GridError
-from planner.headings import N_HEADINGS, bearings_deg, cell_size_m
-
-
-@dataclass(frozen=True, eq=False, kw_only=True)
-class BBox:
-    """A box in degrees, GIS order; cell centres lie on its edges (spec section 1)."""
-
-    west_deg: float
-    south_deg: float
-    east_deg: float
-    north_deg: float
-
-    def __post_init__(self) -> None:
-        values = (self.west_deg, self.south_deg, self.east_deg, self.north_deg)
-        if not all(np.isfinite(values)):
-            raise GridError(f"bbox: expected four finite numbers WEST,SOUTH,EAST,NORTH; got {values}")
-        if not (self.west_deg < self.east_deg and self.south_deg < self.north_deg):
-            raise GridError(
-                f"bbox: expected WEST < EAST and SOUTH < NORTH; got west={self.west_deg}, "
-                f"south={self.south_deg}, east={self.east_deg}, north={self.north_deg}"
-            )
-        if not (-90.0 <= self.south_deg and self.north_deg <= 90.0):
-            raise GridError(f"bbox: latitudes must lie in [-90, 90]; got {self.south_deg}..{self.north_deg}")
+from planner.contract.errors import GridError
+from planner.contract.geodesy import BBox
+from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

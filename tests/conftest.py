@@ -15,7 +15,7 @@ SHARED_OCEAN = Path(os.environ.get("LRAUV_OCEAN_DATA", REPO.parent / "shared" / 
 @pytest.fixture(scope="session")
 def synthetic_forecast(tmp_path_factory) -> Path:
     """The built-in Southern California Bight forecast as a real netCDF file (24 h)."""
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     return write_synthetic(tmp_path_factory.mktemp("forecast") / "scb.nc", SyntheticSettings(seed=0, hours=24))
 
@@ -41,7 +41,7 @@ def dive_log(demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
     cells west of the demo goal to the goal at 1000x: a few seconds of wall time.
     """
     from tests.helpers import DEMO_MISSION, start_west_of_goal
-    from vehicle_sim.demo import run_closed_loop
+    from planner.shore.demo import run_closed_loop
 
     out = tmp_path_factory.mktemp("dive")
     table = out / "demo.lrpt"

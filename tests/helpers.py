@@ -14,8 +14,8 @@ DEMO_MISSION = REPO / "missions" / "demo.yaml"
 
 def plan_for(forecast: Path, goal=None, *, mission: Path = DEMO_MISSION, **settings):  # type: ignore[no-untyped-def]
     """``make_plan`` for a goal (default: the mission's first) on the mission's grid, at the first step."""
-    from planner.mission import load_mission
-    from planner.plan import PlanRequest, make_plan
+    from planner.contract.mission import load_mission
+    from planner.pipeline import PlanRequest, make_plan
 
     m = load_mission(mission)
     request = PlanRequest(forecast_path=forecast, goal=goal or m.goals[0].goal, depths_m=m.region.depths_m,
@@ -49,8 +49,8 @@ def sim_cli(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[st
 
 def audit_log(path: Path):  # type: ignore[no-untyped-def]
     """The decision audit of a finished executive log (``lrauv replay``'s): ``AuditResult``."""
-    from executive.audit import audit
-    from executive.divelog import open_dive
+    from planner.shore.replay.audit import audit
+    from planner.shore.replay.divelog import open_dive
 
     return audit(open_dive(path))
 

@@ -30,7 +30,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
-from executive.state import SubMode  # noqa: E402
+from planner.contract.modes import SubMode  # noqa: E402
 
 Corruption = Callable[[bytes, random.Random], bytes]
 

@@ -31,8 +31,8 @@ import pytest
 import xarray as xr
 
 from planner.cli import main
-from planner.synthetic import SyntheticSettings, write_synthetic
-from planner.table import PolicyTable
+from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
+from planner.contract.table import PolicyTable
 from tests.helpers import REPO
 
 # A 15 x 11-point forecast of the paper's box, 3 hourly steps, layers 0/5/10/15 m (about 44 kB).
@@ -591,7 +591,7 @@ def mission_text(base_nc: Path) -> str:
 
 
 def test_the_base_mission_loads(mission_text, tmp_path):
-    from planner.mission import load_mission
+    from planner.contract.mission import load_mission
 
     path = tmp_path / "mission.yaml"
     path.write_text(mission_text, encoding="utf-8")

@@ -25,7 +25,7 @@ def test_plan_with_flags_writes_table_values_and_pictures(synthetic_forecast, tm
                "--goal-radius=1", "--criterion=robust", "--uncertainty=lateral", f"--out={out}",
                f"--export-values={tmp_path / 'v.npz'}", f"--plot={tmp_path / 'pics'}")
     assert proc.returncode == 0, proc.stderr
-    from planner.table import PolicyTable
+    from planner.contract.table import PolicyTable
 
     table = PolicyTable.load(out)
     assert (table.nx, table.ny, table.depth_m) == (29, 21, (0.0, 5.0, 10.0, 15.0))
@@ -52,7 +52,7 @@ def test_optimistic_and_robust_differ_and_agree_on_goal(synthetic_forecast, tmp_
         out = tmp_path / f"{crit}.lrpt"
         assert run("plan", f"--forecast={synthetic_forecast}", *GRID, "--goal=-117.80,33.40,0",
                    f"--criterion={crit}", f"--out={out}", "--quiet").returncode == 0
-        from planner.table import PolicyTable
+        from planner.contract.table import PolicyTable
 
         tables[crit] = PolicyTable.load(out)
     r, o = tables["robust"].actions, tables["optimistic"].actions

@@ -19,11 +19,11 @@ import pytest
 from executive.helm import HelmConfig
 from executive.loop import ExecConfig, Executive
 from executive.recorder import read_messages
-from executive.state import SubMode
+from planner.contract.modes import SubMode
 from tests.helpers import assert_audit_clean, start_west_of_goal, wait_until
 from tests.linkfault import Faults, LinkFaultProxy
 from vehicle_sim.cli import wait_ready
-from vehicle_sim.demo import stop_process
+from planner.shore.demo import stop_process
 
 REPO = Path(__file__).resolve().parents[1]
 LRAUV = [sys.executable, "-m", "planner.cli"]
@@ -79,7 +79,7 @@ class ExecThread:
 
 def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
     """``lrauv demo``'s path: sim and exec as separate processes over UDP, to the goal."""
-    from vehicle_sim.demo import read_track, run_closed_loop
+    from planner.shore.demo import read_track, run_closed_loop
 
     table_path = tmp_path / "demo.lrpt"
     demo_plan.table.save(table_path)
@@ -165,10 +165,10 @@ def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, syntheti
 def test_a_physical_plans_course_offsets_fly_over_mavlink(synthetic_forecast, tmp_path):
     """A physical plan with FORWARD_LEFT/RIGHT through ``lrauv exec`` and ``lrauv sim`` over UDP:
     the executive commands the offset course, the vehicle holds it, and the audit agrees."""
-    from planner.actions import Action
-    from planner.mission import load_mission
-    from planner.plan import PlanRequest, make_plan
-    from vehicle_sim.demo import run_closed_loop
+    from planner.contract.actions import Action
+    from planner.contract.mission import load_mission
+    from planner.pipeline import PlanRequest, make_plan
+    from planner.shore.demo import run_closed_loop
 
     mission_path = REPO / "missions" / "demo-physical.yaml"
     result = make_plan(PlanRequest.for_mission(load_mission(mission_path), synthetic_forecast))

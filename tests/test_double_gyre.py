@@ -1,4 +1,4 @@
-"""planner.double_gyre: the analytic double gyre (Shadden et al. 2005) as a CF forecast file.
+"""planner.forecast.synthetic.double_gyre: the analytic double gyre (Shadden et al. 2005) as a CF forecast file.
 
 Files are written to tmp_path and read back with the project's reader,
 ``planner.forecast.open_forecast``; properties of the flow are checked against
@@ -17,7 +17,7 @@ import pytest
 import xarray as xr
 
 from planner.cli import build_parser
-from planner.double_gyre import (
+from planner.forecast.synthetic.double_gyre import (
     DoubleGyreSettings,
     box_size_m,
     gyre_velocity,
@@ -25,9 +25,9 @@ from planner.double_gyre import (
     synthesize_gyre,
     write_gyre,
 )
-from planner.errors import PlannerError
+from planner.contract.errors import LrauvError
 from planner.forecast import open_forecast
-from planner.headings import EARTH_RADIUS_M
+from planner.contract.geodesy import EARTH_RADIUS_M
 
 DEFAULT = DoubleGyreSettings()
 SHORT = DoubleGyreSettings(hours=12.0)
@@ -207,7 +207,7 @@ def test_phase_shifts_time() -> None:
     ],
 )
 def test_bad_settings_name_the_field(changes: dict, name: str) -> None:
-    with pytest.raises(PlannerError, match=f"`{name}"):
+    with pytest.raises(LrauvError, match=f"`{name}"):
         DoubleGyreSettings(**changes)
 
 
@@ -252,7 +252,7 @@ def test_command_line_options() -> None:
     ],
 )
 def test_bad_options_name_the_option(argv: list[str], option: str) -> None:
-    with pytest.raises(PlannerError) as info:
+    with pytest.raises(LrauvError) as info:
         _parse(*argv)
     assert str(info.value).startswith(option), str(info.value)
 

@@ -8,10 +8,10 @@ from dataclasses import replace
 import pytest
 
 from executive import durable
-from executive.plans import MissionPlan
-from planner.errors import PlannerError
-from planner.mission import MissionGoal
-from planner.settings import Goal
+from executive.goal_tables import MissionPlan
+from planner.contract.errors import LrauvError
+from planner.contract.mission import MissionGoal
+from planner.contract.settings import Goal
 
 
 @pytest.fixture()
@@ -58,7 +58,7 @@ def test_the_active_goal_index_is_kept(plan, demo_plan, tmp_path):
 def test_a_damaged_state_is_refused_naming_the_file(plan, tmp_path, damage, words):
     durable.save(tmp_path, plan, {}, log_path=tmp_path / "run.mcap", mission_path=None)
     damage(tmp_path)
-    with pytest.raises(PlannerError, match=words) as err:
+    with pytest.raises(LrauvError, match=words) as err:
         durable.load(tmp_path)
     assert str(tmp_path) in str(err.value)
 

@@ -1,4 +1,4 @@
-"""planner.ensemble: synthetic forecast ensembles in one CF file with a ``member`` dimension.
+"""planner.forecast.synthetic.ensemble: synthetic forecast ensembles in one CF file with a ``member`` dimension.
 
 Files are written to tmp_path and read back with netCDF4 (raw values, no
 decoding) and xarray; a member selected with xarray and written alone is read by
@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from planner import ensemble
-from planner.double_gyre import DoubleGyreSettings, write_gyre
-from planner.ensemble import (
+from planner.forecast.synthetic import ensemble
+from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
+from planner.forecast.synthetic.ensemble import (
     MEMBER_DIM,
     gyre_ensemble,
     scb_ensemble,
@@ -26,9 +26,9 @@ from planner.ensemble import (
     write_gyre_ensemble,
     write_scb_ensemble,
 )
-from planner.errors import PlannerError
+from planner.contract.errors import LrauvError
 from planner.forecast import open_forecast
-from planner.synthetic import SyntheticSettings, _forecast_scene, synthesize, write_synthetic
+from planner.forecast.synthetic.scb import SyntheticSettings, _forecast_scene, synthesize, write_synthetic
 
 GYRE = DoubleGyreSettings(hours=6.0)
 SCB = SyntheticSettings(seed=3, hours=6)
@@ -234,12 +234,12 @@ def test_atomic_write_replaces_in_place_and_failure_keeps_the_old_file(
 def test_bad_arguments_name_the_argument(call, name: str, tmp_path: pathlib.Path,  # type: ignore[no-untyped-def]
                                          monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(PlannerError, match=f"`{name}`|{name}"):
+    with pytest.raises(LrauvError, match=f"`{name}`|{name}"):
         call()
     assert list(tmp_path.iterdir()) == []
 
 
-# --------------------------------------------------------------------------- planner.synthetic unchanged
+# --------------------------------------------------------------------------- planner.forecast.synthetic.scb unchanged
 
 
 def test_synthetic_files_without_error_draw_are_unchanged() -> None:
@@ -258,7 +258,7 @@ def test_synthetic_files_without_error_draw_are_unchanged() -> None:
     small = SyntheticSettings(seed=9, hours=2)
     attrs = synthesize(small, issue_number=2).attrs
     assert "error_draw" not in attrs and attrs["settings"] == repr(small)
-    assert attrs["history"] == ("created by planner.synthetic v1.0, seed=9, issue=2; deterministic, "
+    assert attrs["history"] == ("created by planner.forecast.synthetic.scb v1.0, seed=9, issue=2; deterministic, "
                                 "no wall-clock time")
     # Issue n's default draw is still default_rng([seed, 1, n]): its first draws are the extra waves' wavelengths.
     nw = small.n_waves
@@ -313,7 +313,7 @@ def test_write_ensemble_from_args(tmp_path: pathlib.Path) -> None:
     ({"kind": "roms"}, "--kind"),
 ])
 def test_bad_options_name_the_option(changes: dict, option: str, tmp_path: pathlib.Path) -> None:
-    with pytest.raises(PlannerError, match=f"^{option}: "):
+    with pytest.raises(LrauvError, match=f"^{option}: "):
         write_ensemble_from_args(_args(out=tmp_path / "x.nc", **changes))
     assert list(tmp_path.iterdir()) == []
 

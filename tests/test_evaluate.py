@@ -1,6 +1,6 @@
-"""Closed-loop evaluation: planner.evaluate, planner.campaign and ``lrauv evaluate``.
+"""Closed-loop evaluation: planner.shore.evaluation.runs, planner.shore.evaluation.campaign and ``lrauv evaluate``.
 
-Everything runs on a coarse double gyre (planner.double_gyre) written into a temporary folder,
+Everything runs on a coarse double gyre (planner.forecast.synthetic.double_gyre) written into a temporary folder,
 with a copy of missions/eval-double-gyre.yaml on a 21 x 9 grid pointing at it, so that a plan
 takes a fraction of a second. Figures are checked against what the simulator's physics
 (vehicle_sim.dynamics) gives by hand, not pinned numbers.
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.actions import Action
-from planner.campaign import (
+from planner.contract.actions import Action
+from planner.shore.evaluation.campaign import (
     CampaignSpec,
     make_plans,
     prepare,
@@ -31,9 +31,9 @@ from planner.campaign import (
     start_state,
 )
 from planner.cli import main
-from planner.double_gyre import DoubleGyreSettings, write_gyre
-from planner.errors import PlannerError
-from planner.evaluate import (
+from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
+from planner.contract.errors import LrauvError
+from planner.shore.evaluation.runs import (
     METHODS,
     OUTCOMES,
     FeedbackPilot,
@@ -47,10 +47,12 @@ from planner.evaluate import (
     summarise,
 )
 from planner.forecast import open_forecast
-from planner.mission import load_mission
-from planner.physical_solve import PhysicalSolution
-from planner.plan import make_plan
-from vehicle_sim.dynamics import M_PER_DEG_LAT, Setpoint, SetpointKind, VehicleParams, power_draw_w
+from planner.contract.mission import load_mission
+from planner.physical.solve import PhysicalSolution
+from planner.pipeline import make_plan
+from vehicle_sim.dynamics import Setpoint, SetpointKind
+from planner.contract.geodesy import M_PER_DEG_LAT
+from planner.contract.vehicle import VehicleParams, power_draw_w
 from vehicle_sim.world import World
 
 REPO = Path(__file__).resolve().parents[1]
@@ -440,15 +442,15 @@ def test_bad_truth_files_exit_2_naming_the_file(gyre, tmp_path, capsys):
 
 
 def test_campaign_spec_rejects_bad_values(mission, gyre):
-    with pytest.raises(PlannerError, match="--methods"):
+    with pytest.raises(LrauvError, match="--methods"):
         _spec(mission, gyre["steady"], World.calm(), methods=())
-    with pytest.raises(PlannerError, match="--dt-s"):
+    with pytest.raises(LrauvError, match="--dt-s"):
         _spec(mission, gyre["steady"], World.calm(), dt_s=0.0)
-    with pytest.raises(PlannerError, match="--max-hours"):
+    with pytest.raises(LrauvError, match="--max-hours"):
         _spec(mission, gyre["steady"], World.calm(), max_time_s=math.nan)
-    with pytest.raises(PlannerError, match="--replan-h"):
+    with pytest.raises(LrauvError, match="--replan-h"):
         _spec(mission, gyre["steady"], World.calm(), replan_s=math.inf)
-    with pytest.raises(PlannerError, match="--seed"):
+    with pytest.raises(LrauvError, match="--seed"):
         _spec(mission, gyre["steady"], World.calm(), seed=-1)
 
 
@@ -456,7 +458,7 @@ def test_campaign_spec_rejects_bad_values(mission, gyre):
 
 
 def test_open_loop_replays_the_expected_plans_nominal_path(gyre, mission, monkeypatch):
-    import planner.campaign as campaign_module
+    import planner.shore.evaluation.campaign as campaign_module
 
     seen: dict[int, list] = {}
     real = campaign_module.OpenLoopPilot

@@ -23,8 +23,8 @@ from pymavlink import mavutil  # noqa: E402
 from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
 from executive.recorder import read_messages  # noqa: E402
-from executive.state import SubMode  # noqa: E402
-from planner.actions import Action  # noqa: E402
+from planner.contract.modes import SubMode  # noqa: E402
+from planner.contract.actions import Action  # noqa: E402
 
 MAV = mavutil.mavlink
 

@@ -17,7 +17,7 @@ def _heavy_after(code: str) -> str:
 def test_executive_import_path_has_no_heavy_packages():
     loaded = _heavy_after(
         "import executive.loop, executive.cli, executive.recorder, executive.helm, executive.mavlink_bridge\n"
-        "import planner.mission  # read by `lrauv exec --mission`"
+        "import planner.contract.mission  # read by `lrauv exec --mission`"
     )
     assert loaded == "", f"the executive imported {loaded}"
 

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from executive.dive import Dive, load_dive
-from executive.divelog import LogMessage, open_dive
-from executive.export import CSV_COLUMNS, GPX_NAMESPACE, write_csv, write_geojson, write_gpx
+from planner.shore.replay.dive import Dive, load_dive
+from planner.shore.replay.divelog import LogMessage, open_dive
+from planner.shore.replay.export import CSV_COLUMNS, GPX_NAMESPACE, write_csv, write_geojson, write_gpx
 from executive.recorder import LogError, Recorder, Topic
-from planner.headings import EARTH_RADIUS_M
+from planner.contract.geodesy import EARTH_RADIUS_M
 
 REPO = Path(__file__).resolve().parents[1]
 GPX = f"{{{GPX_NAMESPACE}}}"

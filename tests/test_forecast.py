@@ -19,10 +19,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from planner.errors import ForecastError
+from planner.contract.errors import ForecastError
 from planner.forecast import Forecast, describe, nearest_time_index, open_forecast
-from planner.resample import resample
-from planner.grid import BBox, Grid
+from planner.forecast.resample import resample
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
 
 DATA_DIR = Path(
     os.environ.get("LRAUV_OCEAN_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data" / "ocean"

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from planner.errors import ForecastError
+from planner.contract.errors import ForecastError
 from planner.forecast import (
     WINDOW_MARGIN_NODES,
     Forecast,
@@ -31,8 +31,9 @@ from planner.forecast import (
     nearest_time_index,
     open_forecast,
 )
-from planner.grid import BBox, Grid
-from planner.resample import resample
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
+from planner.forecast.resample import resample
 
 REPO = Path(__file__).resolve().parents[1]
 DATA_DIR = Path(os.environ.get("LRAUV_OCEAN_DATA") or REPO.parent / "shared" / "data" / "ocean")
@@ -83,7 +84,7 @@ def _boxes(lon: np.ndarray, lat: np.ndarray) -> list[BBox]:
 
 @pytest.fixture(scope="module")
 def gyre_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from planner.double_gyre import DoubleGyreSettings, write_gyre
+    from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
 
     return write_gyre(tmp_path_factory.mktemp("gyre") / "gyre.nc", DoubleGyreSettings(hours=12.0))
 
@@ -382,9 +383,9 @@ def test_member_of_a_single_forecast(synthetic_forecast: Path, tmp_path: Path) -
 
 
 def test_ensemble_files_of_planner_ensemble(tmp_path: Path) -> None:
-    """Files written by planner.ensemble (member first, standard_name realization) read member by member."""
-    ensemble = pytest.importorskip("planner.ensemble")
-    from planner.double_gyre import DoubleGyreSettings, write_gyre
+    """Files written by planner.forecast.synthetic.ensemble (member first, standard_name realization) read member by member."""
+    ensemble = pytest.importorskip("planner.forecast.synthetic.ensemble")
+    from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
 
     base = DoubleGyreSettings(hours=3.0)
     path = ensemble.write_gyre_ensemble(tmp_path / "gyre_ens.nc", base, 3, seed=7, spread=0.2)
@@ -478,8 +479,9 @@ _MEASURE = r"""
 import json, resource, sys, time
 import numpy as np
 from planner.forecast import open_forecast
-from planner.grid import BBox, Grid
-from planner.resample import resample
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
+from planner.forecast.resample import resample
 def hwm():
     with open("/proc/self/status") as fh:
         return next(int(line.split()[1]) * 1024 for line in fh if line.startswith("VmHWM:"))
@@ -533,7 +535,7 @@ def _broken_cases() -> list[Any]:
 
 @pytest.fixture(scope="module")
 def small_base(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from planner.synthetic import write_synthetic
+    from planner.forecast.synthetic.scb import write_synthetic
     from tests.test_broken_files import SMALL
 
     return write_synthetic(tmp_path_factory.mktemp("base") / "small.nc", SMALL)

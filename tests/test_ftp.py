@@ -1,4 +1,4 @@
-"""MAVLink FTP: the executive's server (executive/ftp.py) and the planner's uploader (planner/ftp_client.py).
+"""MAVLink FTP: the executive's server (executive/ftp.py) and the planner's uploader (planner/shore/ftp_client.py).
 
 Over real UDP on 127.0.0.1 (ephemeral ports): the server runs behind a pymavlink
 ``udpin`` endpoint in a thread, as the executive's system 1 component 191; clients
@@ -27,8 +27,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavftp, mavutil  # noqa: E402
 
 from executive.ftp import MAX_DATA, PAYLOAD_LEN, ErrorCode, Frame, FtpServer, Opcode, ftp_crc32  # noqa: E402
-from planner.errors import PlannerError  # noqa: E402
-from planner.ftp_client import FtpUploadError, put_file  # noqa: E402
+from planner.contract.errors import LrauvError  # noqa: E402
+from planner.shore.ftp_client import FtpUploadError, put_file  # noqa: E402
 
 SYSTEM, COMPONENT = 1, 191
 
@@ -204,7 +204,7 @@ def test_refused_file_makes_put_file_raise(refusing_vehicle: Vehicle) -> None:
             put_file(conn, b"not a table" * 100, "/tables/bad.bin", timeout_s=1.0)
     finally:
         conn.close()
-    assert isinstance(err.value, PlannerError)
+    assert isinstance(err.value, LrauvError)
     assert "/tables/bad.bin" in str(err.value)
     assert [path for path, _ in refusing_vehicle.refused] == ["/tables/bad.bin"]
     assert "/tables/bad.bin" not in refusing_vehicle.server.files

@@ -26,8 +26,8 @@ from executive.state import (
     VehicleState,
     VelocityYaw,
 )
-from planner.actions import Action
-from planner.table import PolicyTable
+from planner.contract.actions import Action
+from planner.contract.table import PolicyTable
 
 CONFIG = HelmConfig(cruise_speed_m_s=1.2, refresh_s=1.0, retry_s=2.0, link_loss_timeout_s=30.0)
 

@@ -19,11 +19,12 @@ import pytest
 
 from executive.helm import DEFAULT_RATES
 from executive.recorder import read_messages
-from executive.state import Phase, SubMode
+from executive.state import Phase
+from planner.contract.modes import SubMode
 from tests.helpers import assert_audit_clean, start_west_of_goal, wait_until
 from tests.linkfault import Faults, LinkFaultProxy
 from tests.test_closed_loop import ExecThread, Sim
-from vehicle_sim.demo import read_track
+from planner.shore.demo import read_track
 
 pytestmark = pytest.mark.slow
 

@@ -320,7 +320,7 @@ def test_node_reader_refuses_a_file_that_is_not_mcap(tmp_path):
 def test_node_reads_the_log_of_a_closed_loop_run(demo_plan, synthetic_forecast, tmp_path):
     """``lrauv sim`` and ``lrauv exec`` over UDP to the goal; Node reads the executive's log as Python does."""
     from tests.helpers import start_west_of_goal
-    from vehicle_sim.demo import run_closed_loop
+    from planner.shore.demo import run_closed_loop
 
     table_path = tmp_path / "demo.lrpt"
     demo_plan.table.save(table_path)

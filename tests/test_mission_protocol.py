@@ -1,4 +1,4 @@
-"""The MAVLink mission protocol (executive/mission_protocol.py, planner/mission_client.py).
+"""The MAVLink mission protocol (executive/mission_protocol.py, planner/shore/mission_client.py).
 
 State machines alone first (a virtual clock, no sockets), then over real UDP
 on 127.0.0.1: a MissionReceiver behind a pymavlink connection as system 1,
@@ -40,16 +40,17 @@ from executive.mission_protocol import (  # noqa: E402
     status_chunks,
 )
 from executive.mission_protocol import STATUSTEXT_LEN  # noqa: E402
-from planner.mission import MissionGoal  # noqa: E402
-from planner.mission_client import (  # noqa: E402
+from planner.contract.mission import MissionGoal  # noqa: E402
+from planner.shore.mission_client import (  # noqa: E402
     MissionDownloadError,
     MissionUploadError,
     _Texts,
     download_items,
     upload_goals,
 )
-from planner.settings import Goal  # noqa: E402
-from planner.waypoints import MissionItem, goals_to_items, items_to_goals  # noqa: E402
+from planner.contract.settings import Goal  # noqa: E402
+from planner.contract.mission import goals_to_items, items_to_goals  # noqa: E402
+from planner.contract.waypoints import MissionItem  # noqa: E402
 
 GCS = (255, 190)
 EXEC = (1, 191)

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from planner.errors import MissionError
-from planner.mission import load_mission
+from planner.contract.errors import MissionError
+from planner.contract.mission import load_mission
 from tests.conftest import REPO
 
 MISSIONS = sorted((REPO / "missions").glob("*.yaml"))

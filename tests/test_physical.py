@@ -1,4 +1,4 @@
-"""The physical planning model (planner.physical) and its two solvers (planner.physical_solve).
+"""The physical planning model (planner.physical.model) and its two solvers (planner.physical.solve).
 
 Transitions are checked against closed forms in still water and uniform currents; the robust
 solver against a plain Bellman iteration of its own equation, the expected solver against value
@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from planner.actions import Action
-from planner.errors import PlannerError
-from planner.grid import BBox, Grid
-from planner.physical import (
+from planner.contract.actions import Action
+from planner.contract.errors import LrauvError
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
+from planner.physical.model import (
     PhysicalModel,
     build_physical,
     fine_grid,
@@ -26,10 +27,10 @@ from planner.physical import (
     start_offsets,
     transition_limit_s,
 )
-from planner.physical_solve import PhysicalSolution, solve_physical
-from planner.settings import Goal, PhysicalSettings, PlanSettings
-from planner.solve import goal_cells_on
-from vehicle_sim.dynamics import VehicleParams, power_draw_w
+from planner.physical.solve import PhysicalSolution, solve_physical
+from planner.contract.settings import Goal, PhysicalSettings, PlanSettings
+from planner.paper.solve import goal_cells_on
+from planner.contract.vehicle import VehicleParams, power_draw_w
 
 FORWARD, DRIFT, UP, DOWN = int(Action.FORWARD), int(Action.DRIFT), int(Action.UP), int(Action.DOWN)
 PARAMS = VehicleParams()
@@ -137,7 +138,7 @@ def test_forward_in_still_water_moves_one_cell_at_cruise_speed(k, axis):
 def test_course_offset_forwards_in_still_water_follow_their_course(k):
     """FORWARD_LEFT/RIGHT: a third of the way to the neighbouring bearing; the one-spacing end in
     still water is then spacing / (speed x cos of the course's angle to the axis it crosses)."""
-    from planner.headings import courses_deg, heading_index
+    from planner.contract.headings import courses_deg, heading_index
 
     grid = small_grid()
     u, v = uniform(grid, 2)
@@ -543,11 +544,11 @@ def test_policy_iteration_guard_raises():
     full = solve_physical(model, goal)
     assert full.iterations >= 2
     one = build(u, v, grid, settings("expected", physical=replace(ps, max_iterations=1), vehicle=FREE), 1, goal)
-    with pytest.raises(PlannerError, match="max_iterations"):
+    with pytest.raises(LrauvError, match="max_iterations"):
         solve_physical(one, goal)
     # The same with real power figures.
     real = build(u, v, grid, settings("expected", physical=replace(PhysicalSettings(), max_iterations=1)), 1, goal)
-    with pytest.raises(PlannerError, match="did not settle in 1 iterations"):
+    with pytest.raises(LrauvError, match="did not settle in 1 iterations"):
         solve_physical(real, goal)
 
 
@@ -579,7 +580,7 @@ def test_value_does_not_depend_much_on_the_planning_resolution():
 
 @pytest.fixture(scope="module")
 def physical_plans(synthetic_forecast):
-    from planner.plan import PlanRequest, make_plan
+    from planner.pipeline import PlanRequest, make_plan
 
     goal = Goal(lat_deg=33.40, lon_deg=-117.80, depth_m=0.0, radius_cells=1)
     box = BBox(west_deg=-118.26, south_deg=33.30, east_deg=-117.70, north_deg=33.70)

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.actions import Action
-from planner.errors import MissionError, TableError
-from planner.mission import Vehicle, load_mission
-from planner.settings import PhysicalSettings
-from planner.table import PolicyTable
+from planner.contract.actions import Action
+from planner.contract.errors import MissionError, TableError
+from planner.contract.mission import Vehicle, load_mission
+from planner.contract.settings import PhysicalSettings
+from planner.contract.table import PolicyTable
 from tests.conftest import REPO
-from vehicle_sim.dynamics import VehicleParams
+from planner.contract.vehicle import VehicleParams
 
 LRAUV = str(Path(sys.executable).parent / "lrauv")
 PHYSICAL_MISSION = REPO / "missions" / "demo-physical.yaml"
@@ -157,7 +157,7 @@ def test_lrauv_plan_physical_writes_table_values_pictures_and_a_summary(physical
 
 
 def test_physical_header_round_trips_the_settings(physical_plan):
-    from planner.dive_plan import table_settings
+    from planner.shore.replay.nominal import table_settings
 
     _, table_path, _, _ = physical_plan
     data = table_path.read_bytes()
@@ -180,7 +180,7 @@ def test_physical_header_round_trips_the_settings(physical_plan):
 
 
 def test_plan_again_gives_the_same_actions_and_a_nominal_path_in_wh(physical_plan, synthetic_forecast):
-    from planner.dive_plan import nominal_from, plan_again
+    from planner.shore.replay.nominal import nominal_from, plan_again
 
     _, table_path, _, _ = physical_plan
     table = PolicyTable.load(table_path)
@@ -197,7 +197,7 @@ def test_plan_again_gives_the_same_actions_and_a_nominal_path_in_wh(physical_pla
 
 def _pack(header: dict, water: np.ndarray, actions: np.ndarray) -> bytes:
     """A version-1 table file with a given header, written without PolicyTable (as an older planner did)."""
-    from planner.table import _pack_payload
+    from planner.contract.table import _pack_payload
 
     head = json.dumps(header, sort_keys=True, separators=(",", ":")).encode()
     raw = _pack_payload(water, actions)

@@ -10,13 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.errors import PlannerError
-from planner.grid import BBox, Grid
-from planner.headings import Direction
-from planner.plot import default_start, plot_all, plot_flow_fields, plot_nominal_path, plot_policy
-from planner.settings import Goal, PlanSettings
-from planner.solve import solve
-from planner.transitions import build_transitions
+from planner.contract.errors import LrauvError
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
+from planner.contract.headings import Direction
+from planner.shore.plots import default_start, plot_all, plot_flow_fields, plot_nominal_path, plot_policy
+from planner.contract.settings import Goal, PlanSettings
+from planner.paper.solve import solve
+from planner.paper.transitions import build_transitions
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 REPO = Path(__file__).resolve().parents[1]
@@ -151,19 +152,19 @@ def test_policy_for_another_heading_and_layer(plan, tmp_path):
 
 def test_bad_arguments_are_rejected(plan, tmp_path):
     u, v, solution = plan
-    with pytest.raises(PlannerError, match="heading"):
+    with pytest.raises(LrauvError, match="heading"):
         plot_policy(solution, tmp_path / "p.png", heading=8)
-    with pytest.raises(PlannerError, match="layer"):
+    with pytest.raises(LrauvError, match="layer"):
         plot_policy(solution, tmp_path / "p.png", layer=2)
-    with pytest.raises(PlannerError, match="shape"):
+    with pytest.raises(LrauvError, match="shape"):
         plot_flow_fields(u[:1], v[:1], solution.model, tmp_path / "f.png")
     land = np.argwhere(~solution.model.water)[0]
-    with pytest.raises(PlannerError, match="land"):
+    with pytest.raises(LrauvError, match="land"):
         plot_nominal_path(solution, (*land, 0), tmp_path / "n.png")
     assert not list(tmp_path.iterdir())
 
 
 def test_importing_the_module_does_not_load_matplotlib():
-    code = "import sys, planner.plot; sys.exit('matplotlib' in sys.modules or 'numba' in sys.modules)"
+    code = "import sys, planner.shore.plots; sys.exit('matplotlib' in sys.modules or 'numba' in sys.modules)"
     result = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr

@@ -18,11 +18,11 @@ import pytest
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import Writer
 
-from executive.audit import audit
-from executive.dive import load_dive, path_length_m
-from executive.divelog import open_dive
+from planner.shore.replay.audit import audit
+from planner.shore.replay.dive import load_dive, path_length_m
+from planner.shore.replay.divelog import open_dive
 from executive.recorder import LogError, RecordStream, Recorder, Topic, read_messages, recover
-from executive.summary import distance_to_polyline_m, summarise
+from planner.shore.replay.summary import distance_to_polyline_m, summarise
 from planner.cli import main as lrauv
 
 from tests.helpers import start_west_of_goal
@@ -170,7 +170,7 @@ def test_the_audit_reports_a_tampered_decision(dive_log, tmp_path, capsys):
 
 
 def test_the_audit_notices_a_table_that_is_not_the_one_used(dive_log, tmp_path, synthetic_forecast, demo_plan):
-    from planner.settings import Goal
+    from planner.contract.settings import Goal
     from tests.helpers import plan_for
 
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)  # the same grid, another goal

@@ -1,4 +1,4 @@
-"""The post-dive report (``planner.report``) on a real closed-loop log, and its track segmentation by hand.
+"""The post-dive report (``planner.shore.replay.report``) on a real closed-loop log, and its track segmentation by hand.
 
 The log is the shared real closed-loop run (``dive_log`` in conftest.py): ``lrauv
 sim`` and ``lrauv exec`` over UDP on 127.0.0.1 at 1000x, from two cells west of
@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from executive.audit import logged_tables
-from executive.dive import Track, load_dive
-from executive.divelog import open_dive
-from planner.report import ActionRun, action_runs, track_segments, write_report
+from planner.shore.replay.audit import logged_tables
+from planner.shore.replay.dive import Track, load_dive
+from planner.shore.replay.divelog import open_dive
+from planner.shore.replay.report import ActionRun, action_runs, track_segments, write_report
 
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"

@@ -22,10 +22,10 @@ from pathlib import Path
 
 import pytest
 
-from executive.divelog import open_dive
+from planner.shore.replay.divelog import open_dive
 from executive.recorder import Topic, read_messages
-from planner.settings import Goal
-from vehicle_sim.demo import stop_process, wait_ready
+from planner.contract.settings import Goal
+from planner.shore.demo import stop_process, wait_ready
 
 from tests.helpers import DEMO_MISSION, REPO, assert_audit_clean, plan_for, start_west_of_goal, wait_until
 

@@ -21,9 +21,9 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from executive import mavlink_bridge as bridge
-from executive.divelog import DiveLog, LogMessage, open_dive
+from planner.shore.replay.divelog import DiveLog, LogMessage, open_dive
 from executive.recorder import LogError, Recorder, Topic
-from executive.restream import rebuild, restream
+from planner.shore.replay.restream import rebuild, restream
 
 FAST = 1e4  # vehicle seconds per wall second: the short dive in well under a second
 IN_FLIGHT = 32  # datagrams the sender may be ahead of the listener (far below the socket's buffer)

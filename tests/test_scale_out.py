@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from planner.batch import BatchItem, collect, plan_item
-from planner.campaign import CampaignSpec, prepare, run_all
+from planner.shore.batch import BatchItem, collect, plan_item
+from planner.shore.evaluation.campaign import CampaignSpec, prepare, run_all
 from planner.cli import main
 from planner.cluster import IN_PROCESS, DaskRunner, InProcess, chunks
-from planner.double_gyre import DoubleGyreSettings, write_gyre
-from planner.mission import load_mission
+from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
+from planner.contract.mission import load_mission
 from vehicle_sim.world import World
 
 distributed = pytest.importorskip("distributed")
@@ -173,15 +173,15 @@ def test_in_process_runner_passes_shared_arguments():
 
 @pytest.fixture(scope="module")
 def ensemble(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from planner.ensemble import write_gyre_ensemble
+    from planner.forecast.synthetic.ensemble import write_gyre_ensemble
 
     return write_gyre_ensemble(tmp_path_factory.mktemp("ens") / "ens.nc", GYRE, members=3, seed=1)
 
 
 def _ensemble_request(path: Path, criterion: str, members=None):
-    from planner.grid import BBox
-    from planner.plan import PlanRequest
-    from planner.settings import Goal, PlanSettings
+    from planner.contract.geodesy import BBox
+    from planner.pipeline import PlanRequest
+    from planner.contract.settings import Goal, PlanSettings
 
     return PlanRequest(forecast_path=path, goal=Goal(lon_deg=-117.86, lat_deg=33.385, depth_m=0.0), depths_m=(0.0,),
                        settings=PlanSettings(model="physical", criterion=criterion),
@@ -191,7 +191,7 @@ def _ensemble_request(path: Path, criterion: str, members=None):
 
 @pytest.mark.parametrize("criterion", ["robust", "expected"])
 def test_ensemble_plan_on_dask_equals_one_process(cluster, ensemble, criterion):
-    from planner.plan import make_plan
+    from planner.pipeline import make_plan
 
     _c, runner = cluster
     here = make_plan(_ensemble_request(ensemble, criterion))
@@ -204,7 +204,7 @@ def test_ensemble_plan_on_dask_equals_one_process(cluster, ensemble, criterion):
 
 def test_robust_over_members_is_at_least_every_members_worst_case(ensemble):
     """Members are outcomes: the worst case over all members' samples is never cheaper than one member's."""
-    from planner.plan import MemberRef, make_plan
+    from planner.pipeline import MemberRef, make_plan
 
     together = make_plan(_ensemble_request(ensemble, "robust")).solution.value_wh
     alone = [make_plan(_ensemble_request(ensemble, "robust", (MemberRef(path=ensemble, member=k),))).solution.value_wh
@@ -217,7 +217,7 @@ def test_robust_over_members_is_at_least_every_members_worst_case(ensemble):
 
 
 def test_expected_over_members_lies_between_the_members(ensemble):
-    from planner.plan import MemberRef, make_plan
+    from planner.pipeline import MemberRef, make_plan
 
     together = make_plan(_ensemble_request(ensemble, "expected")).solution
     alone = [make_plan(_ensemble_request(ensemble, "expected", (MemberRef(path=ensemble, member=k),))).solution.value_wh
@@ -246,8 +246,8 @@ def test_plan_command_plans_an_ensemble_on_the_cluster(cluster, ensemble, files,
                "--scheduler", c.scheduler_address, "--quiet"])
     text = capsys.readouterr().out
     assert rc == 0, text
-    from planner.plan import make_plan
-    from planner.table import PolicyTable
+    from planner.pipeline import make_plan
+    from planner.contract.table import PolicyTable
 
     mission = load_mission(files["physical"])
     request = dataclasses.replace(_ensemble_request(ensemble, "expected"), settings=mission.settings)

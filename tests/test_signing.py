@@ -20,7 +20,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from executive import mavlink_bridge as bridge  # noqa: E402
-from executive import plans  # noqa: E402
+from executive import goal_tables
 from executive.ftp import Frame, Opcode  # noqa: E402
 from executive.recorder import read_messages  # noqa: E402
 from executive.signing import (  # noqa: E402
@@ -41,11 +41,11 @@ from executive.signing import (  # noqa: E402
 )
 from executive.uploads import Uploads  # noqa: E402
 from planner.cli import main as lrauv  # noqa: E402
-from planner.errors import MissionError  # noqa: E402
-from planner.ftp_client import put_file  # noqa: E402
-from planner.mission import load_mission  # noqa: E402
-from planner.mission_client import upload_goals  # noqa: E402
-from planner.waypoints import goals_to_items  # noqa: E402
+from planner.contract.errors import MissionError  # noqa: E402
+from planner.shore.ftp_client import put_file  # noqa: E402
+from planner.contract.mission import load_mission  # noqa: E402
+from planner.shore.mission_client import upload_goals  # noqa: E402
+from planner.contract.mission import goals_to_items  # noqa: E402
 
 from tests.helpers import DEMO_MISSION, plan_for, start_west_of_goal  # noqa: E402
 from tests.test_uploads import Live  # noqa: E402
@@ -262,7 +262,7 @@ def _write_key(path: Path, key: SigningKey) -> Path:
 def signed(demo_plan, synthetic_forecast, tmp_path):
     """A running executive (the demo mission) that requires ``KEY``."""
     table = demo_plan.table
-    plan = plans.MissionPlan(goals=load_mission(DEMO_MISSION).goals, tables=(table,))
+    plan = goal_tables.MissionPlan(goals=load_mission(DEMO_MISSION).goals, tables=(table,))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table), signing=KEY)
     try:
         assert rig.wait(rig.running), "the executive did not start following the plan"

@@ -5,12 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from planner.actions import Action
-from planner.errors import GoalError, GridError
-from planner.grid import BBox, Grid
-from planner.settings import Costs, Goal, PlanSettings
-from planner.solve import solve
-from planner.transitions import build_transitions
+from planner.contract.actions import Action
+from planner.contract.errors import GoalError, GridError
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
+from planner.contract.settings import Costs, Goal, PlanSettings
+from planner.paper.solve import solve
+from planner.paper.transitions import build_transitions
 from tests.paper_reference import INF, PaperModel, algorithm1_optimistic, value_iteration
 
 

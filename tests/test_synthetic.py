@@ -1,4 +1,4 @@
-"""planner.synthetic: a synthetic SCB forecast that reads like a real CF model file.
+"""planner.forecast.synthetic.scb: a synthetic SCB forecast that reads like a real CF model file.
 
 Files are written to tmp_path and read back with netCDF4 (a real file, not the
 in-memory dataset); properties are checked, not pinned numbers.
@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from planner import synthetic
-from planner.errors import PlannerError
-from planner.synthetic import SyntheticSettings, current_at, synthesize, write_synthetic
+from planner.forecast.synthetic import scb as synthetic
+from planner.contract.errors import LrauvError
+from planner.forecast.synthetic.scb import SyntheticSettings, current_at, synthesize, write_synthetic
 
 DEFAULT = SyntheticSettings()
 
@@ -259,13 +259,13 @@ def test_current_at_between_grid_points() -> None:
 
 
 def test_bad_settings_fail_loudly() -> None:
-    with pytest.raises(PlannerError, match="depths_m"):
+    with pytest.raises(LrauvError, match="depths_m"):
         SyntheticSettings(depths_m=(5.0, 0.0))
-    with pytest.raises(PlannerError, match="issue_time"):
+    with pytest.raises(LrauvError, match="issue_time"):
         SyntheticSettings(issue_time="yesterday")
-    with pytest.raises(PlannerError, match="bbox"):
+    with pytest.raises(LrauvError, match="bbox"):
         SyntheticSettings(west_deg=-117.0, east_deg=-118.0)
-    with pytest.raises(PlannerError, match="issue_number"):
+    with pytest.raises(LrauvError, match="issue_number"):
         synthesize(SyntheticSettings(hours=1), issue_number=-1)
 
 
@@ -274,7 +274,7 @@ def test_does_not_use_the_reader() -> None:
     tree = ast.parse(pathlib.Path(synthetic.__file__).read_text())
     imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
     imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
-    assert {m for m in imported if m and m.startswith("planner")} <= {"planner.errors", "planner.atomic"}
+    assert {m for m in imported if m and m.startswith("planner")} <= {"planner.contract.errors", "planner.contract.atomic", "planner.contract.geodesy"}
 
 
 def test_settings_accept_lists_and_stay_hashable() -> None:

@@ -9,9 +9,9 @@ import zlib
 import numpy as np
 import pytest
 
-from planner.actions import Action
-from planner.errors import TableError
-from planner.table import PolicyTable
+from planner.contract.actions import Action
+from planner.contract.errors import TableError
+from planner.contract.table import PolicyTable
 
 
 def test_round_trip_is_bit_exact(demo_plan, tmp_path):
@@ -134,9 +134,9 @@ def test_mismatch_against_an_expected_table(demo_plan):
 
 
 def test_reader_needs_only_numpy():
-    """The executive's import path: planner.table must not pull in xarray, scipy, numba or netCDF4."""
+    """The executive's import path: planner.contract.table must not pull in xarray, scipy, numba or netCDF4."""
     code = (
-        "import sys, planner.table; "
+        "import sys, planner.contract.table; "
         "bad = [m for m in ('xarray', 'scipy', 'numba', 'netCDF4', 'matplotlib') if m in sys.modules]; "
         "print(bad); sys.exit(1 if bad else 0)"
     )

@@ -25,7 +25,7 @@ POINTS = [(LAT, LON, 0.0), (LAT + 0.013, LON - 0.021, 7.5), (33.38, -117.95, 3.0
 
 @pytest.fixture(scope="module")
 def issues(tmp_path_factory) -> tuple[Path, Path]:
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     d = tmp_path_factory.mktemp("issues")
     settings = SyntheticSettings(seed=0, hours=HOURS)
@@ -75,7 +75,7 @@ def test_each_issue_is_the_truth_from_its_own_issue_time(issues, worlds):
 
 
 def test_the_issues_match_the_generator_at_absolute_times(issues):
-    from planner.synthetic import SyntheticSettings, current_at
+    from planner.forecast.synthetic.scb import SyntheticSettings, current_at
 
     settings = SyntheticSettings(seed=0, hours=HOURS)
     seq = load_truth(issues)

@@ -19,18 +19,19 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavftp, mavutil  # noqa: E402
 
-from executive import plans  # noqa: E402
+from executive import goal_tables
 from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
 from executive.recorder import read_messages  # noqa: E402
-from executive.state import Phase, SubMode  # noqa: E402
+from executive.state import Phase  # noqa: E402
+from planner.contract.modes import SubMode
 from planner.cli import main as lrauv  # noqa: E402
-from planner.errors import PlannerError  # noqa: E402
-from planner.ftp_client import put_file  # noqa: E402
-from planner.mission import load_mission  # noqa: E402
-from planner.mission_client import upload_goals  # noqa: E402
-from planner.settings import Goal  # noqa: E402
-from planner.waypoints import goals_to_items  # noqa: E402
+from planner.contract.errors import LrauvError  # noqa: E402
+from planner.shore.ftp_client import put_file  # noqa: E402
+from planner.contract.mission import load_mission  # noqa: E402
+from planner.shore.mission_client import upload_goals  # noqa: E402
+from planner.contract.settings import Goal  # noqa: E402
+from planner.contract.mission import goals_to_items  # noqa: E402
 from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
@@ -49,7 +50,7 @@ def _plan(forecast: Path, goal: Goal, **settings):  # type: ignore[no-untyped-de
 class Live:
     """A simulated vehicle and an executive (with a ground-station link) in threads."""
 
-    def __init__(self, forecast: Path, plan: plans.MissionPlan, log: Path, *, start: tuple[float, float],
+    def __init__(self, forecast: Path, plan: goal_tables.MissionPlan, log: Path, *, start: tuple[float, float],
                  mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False,
                  speedup: float = SPEEDUP, start_depth_m: float = 0.0, replan_period_s: float | None = None,
                  signing=None, **helm) -> None:  # type: ignore[no-untyped-def]
@@ -110,7 +111,7 @@ class Live:
 def live(demo_plan, synthetic_forecast, tmp_path):
     table = demo_plan.table
     mission = load_mission(DEMO)
-    plan = plans.MissionPlan(goals=mission.goals, tables=(table,))
+    plan = goal_tables.MissionPlan(goals=mission.goals, tables=(table,))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table), watch=tmp_path / "inbox")
     try:
         assert rig.wait(rig.running), "the executive did not start following the plan"
@@ -176,7 +177,7 @@ def test_a_bad_table_is_refused_and_the_running_plan_goes_on(live, optimistic_ta
                                                         depth_m=0.0)).to_bytes())
     conn = live.ground_station()
     try:
-        with pytest.raises(PlannerError, match="refused by the vehicle"):
+        with pytest.raises(LrauvError, match="refused by the vehicle"):
             put_file(conn, bytes(blob), "/tables/bad.lrpt", timeout_s=2.0)
     finally:
         conn.close()
@@ -195,7 +196,7 @@ def test_bad_mission_items_are_refused_and_the_running_plan_goes_on(live):
     items[1] = replace(items[1], command=22)  # NAV_TAKEOFF is not a goal
     conn = live.ground_station()
     try:
-        with pytest.raises(PlannerError, match="22"):
+        with pytest.raises(LrauvError, match="22"):
             upload_goals(conn, items)
     finally:
         conn.close()
@@ -203,7 +204,7 @@ def test_bad_mission_items_are_refused_and_the_running_plan_goes_on(live):
 
 
 def test_a_new_forecast_in_the_watched_directory_is_planned_off_loop_and_swapped_in(live, tmp_path):
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     running = live.executive.table
     inbox = tmp_path / "inbox"
@@ -242,7 +243,7 @@ def test_each_safety_limit_fires_its_action_on_the_vehicle(demo_plan, synthetic_
                                                            start_depth_m, situation, mode):
     table = demo_plan.table
     mission = load_mission(DEMO)
-    plan = plans.MissionPlan(goals=mission.goals, tables=(table,))
+    plan = goal_tables.MissionPlan(goals=mission.goals, tables=(table,))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table), start_depth_m=start_depth_m,
                **limits)
     try:
@@ -262,7 +263,7 @@ def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_for
     second_goal = Goal(lon_deg=lon, lat_deg=lat, depth_m=0.0)  # back where the vehicle started
     second = _plan(synthetic_forecast, second_goal) if second_table == "planned on shore" else None
     goals = (replace(mission.goals[0], on_arrival="next"), replace(mission.goals[0], goal=second_goal, on_arrival="hold"))
-    plan = plans.MissionPlan(goals=goals, tables=(first, second))
+    plan = goal_tables.MissionPlan(goals=goals, tables=(first, second))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0)
     summary = rig.join(120.0)
     assert summary.reached and rig.executive.plan.index == 1
@@ -279,7 +280,7 @@ def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_for
 
 
 def test_a_forecast_uploaded_by_ftp_is_planned_onboard_and_swapped_in(live, tmp_path):
-    from planner.synthetic import SyntheticSettings, write_synthetic
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     running = live.executive.table
     blob = write_synthetic(tmp_path / "issue1.nc", SyntheticSettings(seed=0, hours=24), issue_number=1).read_bytes()
@@ -296,7 +297,7 @@ def test_a_forecast_uploaded_by_ftp_is_planned_onboard_and_swapped_in(live, tmp_
 
 def test_replanning_on_a_period(demo_plan, synthetic_forecast, tmp_path):
     table = demo_plan.table
-    plan = plans.MissionPlan(goals=load_mission(DEMO).goals, tables=(table,))
+    plan = goal_tables.MissionPlan(goals=load_mission(DEMO).goals, tables=(table,))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table),
                replan_period_s=600.0)  # 3 s of wall time at 200x
     try:

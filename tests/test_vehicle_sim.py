@@ -27,7 +27,8 @@ os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from vehicle_sim.autopilot import AutopilotSettings, SubMode  # noqa: E402
+from vehicle_sim.autopilot import AutopilotSettings  # noqa: E402
+from planner.contract.modes import SubMode
 from vehicle_sim.dynamics import (  # noqa: E402
     M_PER_DEG_LAT,
     Body,
@@ -140,7 +141,7 @@ def test_noise_only_on_readings_and_repeatable_from_a_seed():
 
 
 def test_world_matches_the_analytic_field_and_marks_land(synthetic_forecast):
-    from planner.synthetic import SyntheticSettings, current_at
+    from planner.forecast.synthetic.scb import SyntheticSettings, current_at
 
     world = World.load(synthetic_forecast)
     settings = SyntheticSettings(seed=0, hours=24)

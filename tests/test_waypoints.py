@@ -1,4 +1,4 @@
-"""Goals as MAVLink mission items and QGC WPL 110 files (planner/waypoints.py, docs/missions.md)."""
+"""Goals as MAVLink mission items and QGC WPL 110 files (planner/contract/waypoints.py, docs/missions.md)."""
 
 from __future__ import annotations
 
@@ -17,22 +17,20 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from planner.arguments import CommandParser  # noqa: E402
-from planner.errors import MissionError, PlannerError  # noqa: E402
-from planner.mission import MAX_GOALS, MissionGoal, load_mission  # noqa: E402
-from planner.settings import Goal  # noqa: E402
-from planner.waypoints import (  # noqa: E402
+from planner.contract.arguments import CommandParser  # noqa: E402
+from planner.contract.errors import MissionError, LrauvError  # noqa: E402
+from planner.contract.mission import MAX_GOALS, MissionGoal, goals_to_items, items_to_goals, load_mission  # noqa: E402
+from planner.contract.settings import Goal  # noqa: E402
+from planner.contract.waypoints import (  # noqa: E402
     COMMAND_NAMES,
     MissionResult,
     WaypointError,
-    goals_to_items,
-    items_to_goals,
     parse_wpl,
     read_wpl,
     wpl_frame,
     write_wpl,
 )
-from planner.waypoints_cli import add_parser, replace_goals, run  # noqa: E402
+from planner.cli.waypoints import add_parser, replace_goals, run  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "missions" / "demo.yaml"
@@ -113,7 +111,7 @@ def test_items_to_goals_names_the_item_and_what_is_wrong(change, message, result
         items_to_goals(_bad(goals_to_items(GOALS, **HOME), **change))
     assert str(info.value).startswith(message)
     assert info.value.result == result
-    assert isinstance(info.value, PlannerError)
+    assert isinstance(info.value, LrauvError)
 
 
 def test_items_to_goals_needs_one_to_max_goals_goals():
@@ -138,8 +136,8 @@ def test_tables_agree_with_pymavlink():
 
 
 def test_the_onboard_modules_stay_light():
-    probe = ("import sys\nimport planner.waypoints, executive.mission_protocol\n"
-             "print(','.join(m for m in ('xarray', 'scipy', 'numba', 'numpy', 'yaml', 'pymavlink', 'planner.mission')"
+    probe = ("import sys\nimport planner.contract.waypoints, executive.mission_protocol\n"
+             "print(','.join(m for m in ('xarray', 'scipy', 'numba', 'numpy', 'yaml', 'pymavlink', 'planner.contract.mission')"
              " if m in sys.modules))")
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=REPO).stdout
     assert loaded.strip() == ""
@@ -310,7 +308,7 @@ def test_import_errors_raise_planner_errors_naming_the_file(tmp_path):
         _cli(["waypoints", "import", str(deep), "--mission", str(base), "--out", str(out)])
     bad = tmp_path / "bad.waypoints"
     bad.write_text("QGC WPL 110\n0 1 0\n")
-    with pytest.raises(PlannerError, match=r"bad.waypoints:2: 3 columns"):
+    with pytest.raises(LrauvError, match=r"bad.waypoints:2: 3 columns"):
         _cli(["waypoints", "import", str(bad), "--mission", str(base), "--out", str(out)])
     with pytest.raises(MissionError, match="no such mission file"):
         _cli(["waypoints", "export", str(tmp_path / "none.yaml"), str(tmp_path / "x.waypoints")])

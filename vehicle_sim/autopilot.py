@@ -27,8 +27,9 @@ import math
 from dataclasses import dataclass, replace
 from enum import Enum, IntEnum, unique
 
-from executive.state import SubMode  # ArduSub's mode numbers, shared with the executive
-from vehicle_sim.dynamics import IDLE, M_PER_DEG_LAT, Body, Setpoint, SetpointKind, TurnDirection
+from planner.contract.modes import SubMode  # ArduSub's mode numbers, shared with the executive
+from vehicle_sim.dynamics import IDLE, Body, Setpoint, SetpointKind, TurnDirection
+from planner.contract.geodesy import M_PER_DEG_LAT
 
 
 @unique

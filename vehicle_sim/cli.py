@@ -5,7 +5,7 @@ files or a directory, a ``TruthSequence``: each forecast is the truth from its o
 time until the next one's), prints one ready line to stdout
 (``lrauv sim: listening on udp HOST:PORT``, the port really bound), then runs until
 ``--duration-s`` simulated seconds have passed or SIGTERM/SIGINT arrives (exit 0 either way,
-the track flushed). Bad input raises ``SimError`` (a ``PlannerError``); ``main`` prints it as
+the track flushed). Bad input raises ``SimError`` (a ``SimulatorError``); ``main`` prints it as
 one line, ``lrauv sim: error: ...``, and exits with status 2.
 """
 
@@ -22,8 +22,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from planner.arguments import CommandParser
-from planner.errors import PlannerError
+from planner.contract.arguments import CommandParser
+from planner.contract.errors import LrauvError, SimulatorError
 
 EXIT_BAD_INPUT = 2
 READY_PREFIX = "lrauv sim: listening on udp "
@@ -32,7 +32,7 @@ FAILSAFE_CHOICES = ("surface", "alt_hold", "disarm", "warn")
 _CALM_START = "-118.393867,33.810313"
 
 
-class SimError(PlannerError):
+class SimError(SimulatorError):
     """Bad simulator input; the message names the flag, the value and what was expected."""
 
 
@@ -110,7 +110,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(args_list)
     try:
         return run(args)
-    except PlannerError as exc:
+    except LrauvError as exc:
         print(f"lrauv sim: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
 
@@ -178,7 +178,7 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     if getattr(args, "mission", None) is not None:  # one set of vehicle figures for planner and simulator
         from dataclasses import replace
 
-        from planner.mission import load_mission
+        from planner.contract.mission import load_mission
 
         config = replace(config, params=load_mission(args.mission).settings.vehicle)
     return world, config, duration

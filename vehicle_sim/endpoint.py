@@ -43,7 +43,8 @@ from vehicle_sim.autopilot import (  # noqa: E402
     Text,
     clip_text,
 )
-from vehicle_sim.dynamics import Body, Reading, VehicleParams, battery_remaining, observe, power_w, step  # noqa: E402
+from vehicle_sim.dynamics import Body, Reading, battery_remaining, observe, power_w, step  # noqa: E402
+from planner.contract.vehicle import VehicleParams
 from vehicle_sim.world import Truth  # noqa: E402
 
 SYSTEM_ID = 1

@@ -3,7 +3,7 @@
 A ``World`` holds the currents on a regular lon/lat grid, ``(T, Z, Y, X)`` float64 with NaN
 for land, read with ``planner.forecast.open_forecast``. Curvilinear forecasts and forecasts
 with per-column (terrain-following) depths are put onto a regular grid once, at load, with
-``planner.resample.resample`` (the planner's own spec section 1 rules), at about their native
+``planner.forecast.resample.resample`` (the planner's own spec section 1 rules), at about their native
 resolution.
 
 ``current_at`` is called once per physics step, so it is plain Python: ``bisect`` on the
@@ -35,8 +35,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.errors import PlannerError
-from planner.grid import BBox, Grid
+from planner.contract.errors import LrauvError, SimulatorError
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
 
 if TYPE_CHECKING:
     from planner.forecast import Forecast
@@ -45,7 +46,7 @@ _CACHE_MAX_CELLS = 65_536  # cached 16-node blocks (a few MB); cleared when full
 _MAX_RESAMPLED_POINTS = 2_000_000  # per level: caps the regular grid made for a curvilinear forecast
 
 
-class WorldError(PlannerError):
+class WorldError(SimulatorError):
     """A truth forecast the simulator cannot use; the message names the file."""
 
 
@@ -97,7 +98,7 @@ class World:
 
         try:
             forecast = open_forecast(path)
-        except PlannerError as exc:
+        except LrauvError as exc:
             raise WorldError(str(exc)) from exc
         return cls.from_forecast(forecast)
 
@@ -418,7 +419,7 @@ def _regularize(
     distance between neighbouring points); the levels are the forecast's own, or for
     terrain-following levels the median depth of each level at the first time.
     """
-    from planner.resample import resample
+    from planner.forecast.resample import resample
 
     src = forecast.source
     if forecast.depth_m is None:

@@ -1,0 +1,138 @@
+"""``lrauv replay LOG.mcap``: post-dive analysis of an executive's log (docs/replay.md).
+
+Prints the dive summary (``planner.shore.replay.summary``) and runs the decision audit
+(``planner.shore.replay.audit``); on request writes a report (``planner.shore.replay.report``), CSV,
+GeoJSON and GPX (``planner.shore.replay.export``), and re-streams the telemetry as MAVLink
+(``planner.shore.replay.restream``). The planning forecast, found by its identity, gives
+the nominal path and the predicted cost-to-go (``planner.shore.replay.nominal``); without
+it those parts say so and the rest goes on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from planner.contract.errors import LrauvError
+
+_MAX_LISTED = 20  # audit differences printed in full
+EXIT_AUDIT_DIFFERS = 1
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser("replay", help="summarise, audit, report, export or re-stream a dive's MCAP log",
+                       description="Post-dive analysis of an `lrauv exec` log (docs/replay.md).")
+    p.add_argument("log", type=Path, help="MCAP log written by `lrauv exec` (a truncated one replays up to the cut)")
+    p.add_argument("--forecast", type=Path,
+                   help="the planning forecast, for the nominal path and cost-to-go (default: looked for by its"
+                        " identity beside the log and where the table says)")
+    p.add_argument("--report", type=Path, metavar="DIR", help="write PNG pictures and index.html here")
+    p.add_argument("--csv", type=Path, help="write the state and action time series as CSV")
+    p.add_argument("--geojson", type=Path, help="write the track as GeoJSON (RFC 7946)")
+    p.add_argument("--gpx", type=Path, help="write the track as GPX 1.1")
+    p.add_argument("--no-audit", action="store_true", help="skip running the decisions again")
+    p.add_argument("--mavlink", metavar="ADDRESS",
+                   help="re-send the recorded telemetry as MAVLink to this pymavlink address (e.g. udpout:127.0.0.1:14550)")
+    p.add_argument("--speed", type=float, default=10.0, help="re-stream speed, times real (vehicle) time (default 10)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.shore.replay.audit import audit, logged_tables, summary_line
+    from planner.shore.replay.dive import load_dive
+    from planner.shore.replay.divelog import open_dive
+    from planner.shore.replay.summary import format_summary, summarise
+
+    if args.mavlink is not None and not (math.isfinite(args.speed) and args.speed > 0):
+        raise LrauvError(f"--speed: expected a positive factor; got {args.speed}")
+    t0 = time.perf_counter()
+    log = open_dive(args.log)
+    dive = load_dive(log)
+    if len(dive.track) == 0:
+        print(f"log        {log.path}: {log.where_it_ends()}")
+        raise LrauvError(f"{log.path}: the log holds no decision: the executive never had a position to act on")
+    tables = logged_tables(log)
+    plans, nominal, note = _plans(dive, tables, args.forecast)
+    summary = summarise(dive, nominal=nominal, nominal_note=note)
+    text = format_summary(summary)
+    print(text, flush=True)
+    status = 0
+    if not args.no_audit:
+        result = audit(log)
+        print(summary_line(result))
+        for m in result.mismatches[:_MAX_LISTED]:
+            print(f"  {m.describe()}")
+        if len(result.mismatches) > _MAX_LISTED:
+            print(f"  ... and {len(result.mismatches) - _MAX_LISTED:,} more")
+        status = 0 if result.clean else EXIT_AUDIT_DIFFERS
+    written = _exports(args, dive)
+    if args.report is not None:
+        from planner.shore.replay.report import write_report
+
+        first = next(iter(plans.values()), None)
+        written.append(write_report(dive, args.report, tables=tables, plan=first, summary_text=text))
+    for path in written:
+        print(f"wrote      {path}")
+    print(f"replay     {time.perf_counter() - t0:.1f} s", flush=True)
+    if args.mavlink is not None:
+        _restream(log, args.mavlink, args.speed)
+    return status
+
+
+def _plans(dive: Any, tables: dict[str, Any], forecast: Path | None) -> tuple[dict[str, Any], dict[int, Any], str | None]:
+    """Plans again for the segments' tables, and each segment's nominal path; or why not."""
+    from planner.shore.replay.nominal import find_forecast, nominal_from, plan_again
+
+    plans: dict[str, Any] = {}
+    nominal: dict[int, Any] = {}
+    notes: list[str] = []
+    near = (dive.log.path.parent,)
+    for index, seg in enumerate(dive.track.segments()):
+        table = tables.get(seg.table_crc32) if seg.table_crc32 is not None else None
+        cells = dive.track.cell[seg.start:seg.stop]
+        valid = cells[:, 0] >= 0
+        if table is None or not valid.any():
+            continue
+        if seg.table_crc32 not in plans:
+            try:
+                plans[seg.table_crc32] = plan_again(table, find_forecast(table, given=forecast, near=near))
+            except LrauvError as exc:
+                notes.append(str(exc))
+                plans[seg.table_crc32] = None
+        plan = plans[seg.table_crc32]
+        if plan is not None:
+            nominal[index] = nominal_from(plan, tuple(int(x) for x in cells[valid][0]))  # type: ignore[arg-type]
+    note = "; ".join(dict.fromkeys(notes)) or None
+    return {k: v for k, v in plans.items() if v is not None}, nominal, note
+
+
+def _exports(args: argparse.Namespace, dive: Any) -> list[Path]:
+    if args.csv is None and args.geojson is None and args.gpx is None:
+        return []
+    from planner.shore.replay.export import write_csv, write_geojson, write_gpx
+
+    out = []
+    for path, write in ((args.csv, write_csv), (args.geojson, write_geojson), (args.gpx, write_gpx)):
+        if path is not None:
+            out.append(write(dive, path))
+    return out
+
+
+def _restream(log: Any, address: str, speed: float) -> None:
+    import signal
+    import threading
+
+    from planner.shore.replay.restream import restream
+
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    print(f"restream   to {address} at {speed:g}x (Ctrl-C stops)", flush=True)
+    r = restream(log, address, speed=speed, stop=stop)
+    skipped = ", ".join(f"{k} ({v})" for k, v in r.skipped.items()) if r.skipped else "none"
+    print(f"restream   {r.messages_sent:,} messages, {r.vehicle_s / 3600:.2f} h of vehicle time in {r.wall_s:.1f} s;"
+          f" skipped {skipped}", file=sys.stdout, flush=True)

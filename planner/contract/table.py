@@ -1,0 +1,545 @@
+"""The compact policy table: the file uploaded to the vehicle (docs/policy-table.md).
+
+Reading needs only numpy and the standard library, so the executive can use
+this module without the planner's solver, xarray or scipy. Writing takes a
+``Solution``-like object (anything with ``action``, ``model.water`` and the
+grid) and never imports the solver either.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import zlib
+from dataclasses import dataclass, field
+from dataclasses import fields as dataclass_fields
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.contract.actions import FORWARD_ACTIONS, Action
+from planner.contract.atomic import write_atomic
+from planner.contract.errors import TableError
+from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
+
+MAGIC = b"LRAUVPT\x00"
+FORMAT_VERSION = 1
+FLAG_ZLIB = 0x0001
+_PREAMBLE = struct.Struct("<8sHHI")  # magic, version, flags, header length
+_PAYLOAD = struct.Struct("<II")  # stored payload length, raw payload length
+_CRC = struct.Struct("<I")
+MAX_STATES = 1 << 31
+# A cell is left only once the vehicle is this fraction of a spacing beyond its edge
+# (docs/executive.md): the executive's default, and the evaluation's (docs/evaluation.md).
+CELL_MARGIN = 0.1
+
+LookupReason = Literal["ok", "at_goal", "unreachable", "outside_grid", "land"]
+# The vehicle figures a physical plan depends on (``VehicleParams``' other fields are the simulator's alone).
+PHYSICAL_VEHICLE_KEYS = ("cruise_speed_m_s", "max_speed_m_s", "yaw_rate_deg_s", "glide_rate_m_s", "hotel_w",
+                         "propulsion_w", "buoyancy_w", "battery_wh")
+
+
+@dataclass(frozen=True, slots=True)
+class Lookup:
+    """The table's answer for one position and heading; the executive never gets a bare None."""
+
+    action: Action
+    reason: LookupReason
+    state: tuple[int, int, int, int] | None  # (l, j, i, k) as exported, None outside the grid
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PolicyTable:
+    """Actions for every state ``[l, j, i, k]`` plus the water mask ``[l, j, i]`` and provenance.
+
+    Geometry follows spec section 1: cell centres ``lon0 + i * dlon``, ``lat0 + j * dlat``.
+    """
+
+    lon0_deg: float
+    lat0_deg: float
+    dlon_deg: float
+    dlat_deg: float
+    nx: int
+    ny: int
+    depth_m: tuple[float, ...]
+    goal_lon_deg: float
+    goal_lat_deg: float
+    goal_depth_m: float
+    goal_radius_cells: int
+    criterion: str
+    uncertainty: str
+    model: str
+    costs: dict[str, int]
+    forecast_source: str
+    forecast_identity: str
+    forecast_time: str | None
+    planner_version: str
+    actions: NDArray[np.uint8] = field(repr=False)  # (L, ny, nx, 8)
+    water: NDArray[np.bool_] = field(repr=False)  # (L, ny, nx)
+    # Physical plans: {"vehicle": {...}, "sampling": {...}} (docs/policy-table.md); None for the paper model.
+    physical: dict[str, dict[str, float | int | bool | None]] | None = None
+
+    def __post_init__(self) -> None:
+        shape = (len(self.depth_m), self.ny, self.nx)
+        if self.actions.shape != shape + (N_HEADINGS,) or self.water.shape != shape:
+            raise TableError(f"table arrays: expected {shape + (N_HEADINGS,)} and {shape}; got {self.actions.shape} and {self.water.shape}")
+        for arr in (self.actions, self.water):
+            arr.setflags(write=False)
+        dx_m, dy_m = cell_size_m(self.lat_deg, self.dlon_deg, self.dlat_deg)
+        bearings = bearings_deg(dx_m, dy_m)
+        bearings.setflags(write=False)
+        object.__setattr__(self, "_bearings", bearings)
+        # Plain floats for the per-message lookup: numpy's per-call overhead dominates on 8 values.
+        object.__setattr__(self, "_bearing_rows", tuple(tuple(float(b) for b in row) for row in bearings))
+        object.__setattr__(self, "_course_rows", courses_deg(bearings).tolist())
+
+    @classmethod
+    def from_solution(
+        cls,
+        solution: Any,
+        *,
+        forecast_source: str,
+        forecast_identity: str,
+        forecast_time: str | None,
+    ) -> PolicyTable:
+        """Pack a solved plan (``planner.paper.solve.Solution``) with its provenance."""
+        from planner import __version__
+
+        model = solution.model
+        grid = model.grid
+        settings = model.settings
+        goal = solution.goal
+        physical = None
+        costs = {"drift": settings.costs.drift, "forward": settings.costs.forward,
+                 "rotate": settings.costs.rotate, "glide": settings.costs.glide}
+        if settings.model == "physical":  # costs are watt-hours from the vehicle figures, not the paper's
+            costs = {}
+            physical = {
+                "vehicle": {key: getattr(settings.vehicle, key) for key in PHYSICAL_VEHICLE_KEYS},
+                "sampling": {f.name: getattr(settings.physical, f.name) for f in dataclass_fields(settings.physical)},
+            }
+        return cls(
+            lon0_deg=float(grid.lon_deg[0]),
+            lat0_deg=float(grid.lat_deg[0]),
+            dlon_deg=grid.dlon_deg,
+            dlat_deg=grid.dlat_deg,
+            nx=grid.nx,
+            ny=grid.ny,
+            depth_m=tuple(float(d) for d in grid.depth_m),
+            goal_lon_deg=float(goal.lon_deg),
+            goal_lat_deg=float(goal.lat_deg),
+            goal_depth_m=float(goal.depth_m),
+            goal_radius_cells=int(goal.radius_cells),
+            criterion=settings.criterion,
+            uncertainty=settings.uncertainty,
+            model=settings.model,
+            costs=costs,
+            forecast_source=forecast_source,
+            forecast_identity=forecast_identity,
+            forecast_time=forecast_time,
+            planner_version=__version__,
+            actions=np.ascontiguousarray(solution.action, dtype=np.uint8),
+            water=np.ascontiguousarray(model.water),
+            physical=physical,
+        )
+
+    # -- geometry -------------------------------------------------------------------
+    @property
+    def lon_deg(self) -> NDArray[np.float64]:
+        return self.lon0_deg + self.dlon_deg * np.arange(self.nx)
+
+    @property
+    def lat_deg(self) -> NDArray[np.float64]:
+        return self.lat0_deg + self.dlat_deg * np.arange(self.ny)
+
+    @property
+    def n_layers(self) -> int:
+        return len(self.depth_m)
+
+    @property
+    def n_states(self) -> int:
+        return self.n_layers * self.ny * self.nx * N_HEADINGS
+
+    def bearing_deg(self, j: int, k: int) -> float:
+        """True compass bearing of grid direction ``k`` in row ``j`` (spec section 2)."""
+        return float(self._bearings[j, k])  # type: ignore[attr-defined]
+
+    def course_deg(self, j: int, k: int, action: Action) -> float:
+        """Compass course of a FORWARD action in heading ``k`` of row ``j``: ``bearing_k(j)`` for FORWARD,
+        a third of the way to the neighbouring heading's bearing for FORWARD_LEFT/RIGHT."""
+        return self._course_rows[j][k][FORWARD_ACTIONS.index(action)]  # type: ignore[attr-defined]
+
+    def cell_centre(self, j: int, i: int) -> tuple[float, float]:
+        """``(lat_deg, lon_deg)`` of a cell centre."""
+        return (self.lat0_deg + j * self.dlat_deg, self.lon0_deg + i * self.dlon_deg)
+
+    def locate(self, lat_deg: float, lon_deg: float, depth_m: float) -> tuple[int, int, int] | None:
+        """Cell ``(l, j, i)`` containing a position, or None outside the planned volume.
+
+        A cell spans half a spacing either side of its centre; the layer is the
+        nearest one (lower index at a midpoint, as for the goal in spec section 6),
+        and a depth more than half a layer spacing below the deepest layer is outside.
+        """
+        if not (math.isfinite(lat_deg) and math.isfinite(lon_deg) and math.isfinite(depth_m)):
+            return None
+        fi = (lon_deg - self.lon0_deg) / self.dlon_deg
+        fj = (lat_deg - self.lat0_deg) / self.dlat_deg
+        if not (-0.5 <= fi <= self.nx - 0.5 and -0.5 <= fj <= self.ny - 0.5):
+            return None
+        i = min(max(math.ceil(fi - 0.5), 0), self.nx - 1)
+        j = min(max(math.ceil(fj - 0.5), 0), self.ny - 1)
+        depths = self.depth_m
+        below = 0.5 * (depths[-1] - depths[-2]) if len(depths) > 1 else 2.5
+        if depth_m > depths[-1] + below:
+            return None
+        l, best = 0, abs(depths[0] - depth_m)
+        for n in range(1, len(depths)):
+            d = abs(depths[n] - depth_m)
+            if d < best:  # strict: a midpoint keeps the lower layer
+                l, best = n, d
+        return (l, j, i)
+
+    def heading_index(self, j: int, heading_deg: float) -> int:
+        """Grid direction nearest to a compass heading in row ``j``; ties to the lower ``k`` (spec 2)."""
+        h = float(heading_deg)
+        best_k, best = 0, math.inf
+        for k, b in enumerate(self._bearing_rows[j]):  # type: ignore[attr-defined]
+            diff = abs((h - b + 180.0) % 360.0 - 180.0)
+            if diff < best:  # strict: ties keep the lower k
+                best_k, best = k, diff
+        return best_k
+
+    def lookup(self, lat_deg: float, lon_deg: float, depth_m: float, heading_deg: float) -> Lookup:
+        """The action for a position and compass heading, in constant time."""
+        cell = self.locate(lat_deg, lon_deg, depth_m)
+        if cell is None:
+            return Lookup(Action.UNREACHABLE, "outside_grid", None)
+        return self.lookup_cell(cell, heading_deg)
+
+    def near_cell(self, lat_deg: float, lon_deg: float, j: int, i: int, margin_cells: float) -> bool:
+        """Whether a position lies within ``margin_cells`` of a spacing beyond cell ``(j, i)``'s edges."""
+        reach = 0.5 + margin_cells
+        return (abs((lon_deg - self.lon0_deg) / self.dlon_deg - i) <= reach
+                and abs((lat_deg - self.lat0_deg) / self.dlat_deg - j) <= reach)
+
+    def lookup_held(self, lat_deg: float, lon_deg: float, depth_m: float, heading_deg: float,
+                    held: tuple[int, int] | None, margin_cells: float = CELL_MARGIN) -> Lookup:
+        """``lookup`` with hysteresis: keep water cell ``held = (j, i)`` while within ``margin_cells`` of it.
+
+        Without it a vehicle on a boundary, pushed back by the current after each crossing,
+        makes the decision chatter between two cells' actions (docs/executive.md). Arrival and
+        leaving the grid are never delayed; the layer and heading are always the measured ones.
+        """
+        look = self.lookup(lat_deg, lon_deg, depth_m, heading_deg)
+        if margin_cells <= 0.0 or held is None or look.state is None or look.reason not in ("ok", "unreachable", "land"):
+            return look
+        l, j, i, _k = look.state
+        hj, hi = held
+        if (j, i) == (hj, hi) or not self.near_cell(lat_deg, lon_deg, hj, hi, margin_cells) or not self.water[l, hj, hi]:
+            return look
+        return self.lookup_cell((l, hj, hi), heading_deg)
+
+    def lookup_cell(self, cell: tuple[int, int, int], heading_deg: float) -> Lookup:
+        """The action for cell ``(l, j, i)`` of the grid and a compass heading."""
+        l, j, i = cell
+        k = self.heading_index(j, heading_deg) if math.isfinite(heading_deg) else 0
+        state = (l, j, i, k)
+        if not self.water[l, j, i]:
+            return Lookup(Action.UNREACHABLE, "land", state)
+        action = Action(int(self.actions[state]))
+        if action == Action.AT_GOAL:
+            return Lookup(action, "at_goal", state)
+        if action == Action.UNREACHABLE:
+            return Lookup(action, "unreachable", state)
+        return Lookup(action, "ok", state)
+
+    # -- identity -------------------------------------------------------------------
+    def header(self) -> dict[str, Any]:
+        """The JSON header, as documented in docs/policy-table.md."""
+        out = {
+            "grid": {
+                "lon0_deg": self.lon0_deg,
+                "lat0_deg": self.lat0_deg,
+                "dlon_deg": self.dlon_deg,
+                "dlat_deg": self.dlat_deg,
+                "nx": self.nx,
+                "ny": self.ny,
+                "depth_m": list(self.depth_m),
+            },
+            "headings": {"count": N_HEADINGS, "convention": "grid-k-ccw-from-east"},
+            "goal": {
+                "lon_deg": self.goal_lon_deg,
+                "lat_deg": self.goal_lat_deg,
+                "depth_m": self.goal_depth_m,
+                "radius_cells": self.goal_radius_cells,
+            },
+            "model": self.model,
+            "criterion": self.criterion,
+            "uncertainty": self.uncertainty,
+            "costs": dict(self.costs),
+            "forecast": {
+                "source": self.forecast_source,
+                "identity": self.forecast_identity,
+                "time": self.forecast_time,
+            },
+            "planner_version": self.planner_version,
+        }
+        if self.physical is not None:  # optional: paper tables keep the bytes they always had
+            out["physical"] = {part: dict(values) for part, values in self.physical.items()}
+        return out
+
+    # -- bytes ----------------------------------------------------------------------
+    def to_bytes(self, *, compress: bool = True) -> bytes:
+        """Serialise: preamble, JSON header, 1-bit water mask + 4-bit actions, CRC32."""
+        header = json.dumps(self.header(), sort_keys=True, separators=(",", ":")).encode("utf-8")
+        raw = _pack_payload(self.water, self.actions)
+        stored = zlib.compress(raw, 9) if compress else raw
+        body = b"".join(
+            [
+                _PREAMBLE.pack(MAGIC, FORMAT_VERSION, FLAG_ZLIB if compress else 0, len(header)),
+                header,
+                _PAYLOAD.pack(len(stored), len(raw)),
+                stored,
+            ]
+        )
+        return body + _CRC.pack(zlib.crc32(body))
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, name: str = "table") -> PolicyTable:
+        """Parse and check a table; raise TableError saying what is wrong and where."""
+        data = bytes(data)
+        if len(data) < _PREAMBLE.size + _PAYLOAD.size + _CRC.size:
+            raise TableError(f"{name}: truncated: {len(data)} bytes is shorter than the smallest table")
+        magic, version, flags, header_len = _PREAMBLE.unpack_from(data, 0)
+        if magic != MAGIC:
+            raise TableError(f"{name}: not a policy table: magic {magic!r}, expected {MAGIC!r}")
+        if version != FORMAT_VERSION:
+            raise TableError(f"{name}: format version {version} is not supported; this reader reads version {FORMAT_VERSION}")
+        if flags & ~FLAG_ZLIB:
+            raise TableError(f"{name}: unknown flags 0x{flags:04x}")
+        pos = _PREAMBLE.size + header_len
+        if pos + _PAYLOAD.size + _CRC.size > len(data):
+            raise TableError(f"{name}: truncated: the header says {header_len} header bytes but the file has {len(data)} bytes")
+        stored_len, raw_len = _PAYLOAD.unpack_from(data, pos)
+        end = pos + _PAYLOAD.size + stored_len
+        if end + _CRC.size != len(data):
+            what = "truncated" if end + _CRC.size > len(data) else "has trailing bytes"
+            raise TableError(f"{name}: {what}: expected {end + _CRC.size} bytes from its lengths, got {len(data)}")
+        (crc,) = _CRC.unpack_from(data, end)
+        actual = zlib.crc32(data[:end])
+        if crc != actual:
+            raise TableError(f"{name}: CRC32 mismatch: stored 0x{crc:08x}, computed 0x{actual:08x}; the file is corrupt")
+        try:
+            header = json.loads(data[_PREAMBLE.size : pos].decode("utf-8"))
+        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise TableError(f"{name}: header is not valid JSON: {exc}") from None
+        except RecursionError:
+            raise TableError(f"{name}: header is not valid JSON: nested too deeply") from None
+        try:
+            fields = _header_fields(header)
+        except TableError as exc:
+            raise TableError(f"{name}: header {exc}") from None
+        shape = (len(fields["depth_m"]), fields["ny"], fields["nx"])
+        expected = _payload_len(shape[0] * shape[1] * shape[2])
+        if raw_len != expected:
+            raise TableError(
+                f"{name}: payload declared as {raw_len:,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
+                f"{N_HEADINGS} needs {expected:,}"
+            )
+        stored = data[pos + _PAYLOAD.size : end]
+        if flags & FLAG_ZLIB:
+            # At most the bytes the grid needs are inflated: a corrupt or hostile stream cannot
+            # make the reader allocate more than the table it claims to be.
+            inflate = zlib.decompressobj()
+            try:
+                raw = inflate.decompress(stored, expected + 1)
+            except zlib.error as exc:
+                raise TableError(f"{name}: compressed payload is corrupt: {exc}") from None
+            if len(raw) > expected or inflate.unconsumed_tail:
+                raise TableError(f"{name}: compressed payload inflates to more than the {expected:,} bytes the grid needs")
+            if not inflate.eof:
+                raise TableError(f"{name}: compressed payload is corrupt: the zlib stream ends early ({len(raw):,} of {expected:,} bytes)")
+        else:
+            raw = stored
+        if len(raw) != expected:
+            raise TableError(
+                f"{name}: payload is {len(raw):,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
+                f"{N_HEADINGS} needs {expected:,}"
+            )
+        water, actions = _unpack_payload(raw, shape)
+        if np.any(actions > max(Action)):
+            raise TableError(f"{name}: action codes above {int(max(Action))} in the payload")
+        if np.any(actions > Action.UNREACHABLE):
+            if fields["model"] != "physical":
+                raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a "
+                                 f"{fields['model']}-model table; only physical plans have them")
+            if (fields.get("physical") or {}).get("sampling", {}).get("course_offsets") is False:
+                raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a table "
+                                 "whose header says physical.sampling.course_offsets false")
+        if np.any(actions[~water] != Action.UNREACHABLE):
+            raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
+        table = cls(actions=actions, water=water, **fields)
+        if flags & FLAG_ZLIB:
+            # A compressed file is the serialisation ``crc32`` names: keep its checked CRC rather
+            # than compress the whole table again (12 ms at 320,000 states, on the executive's loop).
+            table.__dict__["crc32"] = crc
+        return table
+
+    def save(self, path: str | os.PathLike[str], *, compress: bool = True) -> Path:
+        """Write atomically: a temporary file in the same folder, then rename."""
+        return write_atomic(path, self.to_bytes(compress=compress))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> PolicyTable:
+        """Read and check a table file."""
+        return cls.from_bytes(read_table_file(path), name=str(path))
+
+    @cached_property
+    def crc32(self) -> int:
+        """CRC32 of the compressed serialisation: the table's identity in logs (computed once)."""
+        return int.from_bytes(self.to_bytes()[-4:], "little")
+
+    def matches(self, other: PolicyTable) -> list[str]:
+        """Fields that differ from another table's grid or goal (empty when compatible)."""
+        mine, theirs = self.header(), other.header()
+        return [key for key in ("grid", "goal") if mine[key] != theirs[key]]
+
+
+def read_table_file(path: str | os.PathLike[str]) -> bytes:
+    """A table file's bytes, unchecked (``PolicyTable.from_bytes`` checks them); TableError naming it."""
+    try:
+        return Path(path).read_bytes()
+    except OSError as exc:
+        raise TableError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
+
+
+def _payload_len(n_cells: int) -> int:
+    return (n_cells + 7) // 8 + (n_cells * N_HEADINGS + 1) // 2
+
+
+def _pack_payload(water: NDArray[np.bool_], actions: NDArray[np.uint8]) -> bytes:
+    """Water bits (little bit order, [l, j, i]) then actions, two per byte, low nibble first."""
+    mask = np.packbits(np.ascontiguousarray(water).ravel(), bitorder="little")
+    flat = np.ascontiguousarray(actions).ravel().astype(np.uint8)
+    if flat.size % 2:
+        flat = np.concatenate([flat, np.zeros(1, dtype=np.uint8)])
+    nibbles = (flat[0::2] & 0x0F) | ((flat[1::2] & 0x0F) << 4)
+    return mask.tobytes() + nibbles.astype(np.uint8).tobytes()
+
+
+def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int]) -> tuple[NDArray[np.bool_], NDArray[np.uint8]]:
+    n_cells = int(np.prod(cell_shape))
+    n_mask = (n_cells + 7) // 8
+    buf = np.frombuffer(raw, dtype=np.uint8)
+    water = np.unpackbits(buf[:n_mask], bitorder="little")[:n_cells].astype(bool).reshape(cell_shape)
+    packed = buf[n_mask:]
+    actions = np.empty(packed.size * 2, dtype=np.uint8)
+    actions[0::2] = packed & 0x0F
+    actions[1::2] = packed >> 4
+    return water, actions[: n_cells * N_HEADINGS].reshape(cell_shape + (N_HEADINGS,))
+
+
+def _header_fields(header: Any) -> dict[str, Any]:
+    """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value."""
+    top = _section(header, "")
+    g = _section(_key(top, "grid", ""), "grid")
+    nx, ny = _int(_key(g, "nx", "grid"), "grid.nx"), _int(_key(g, "ny", "grid"), "grid.ny")
+    for key, n in (("grid.nx", nx), ("grid.ny", ny)):
+        if n < 2:
+            raise TableError(f"{key}: expected at least 2 cells; got {n}")
+    depth_raw = _key(g, "depth_m", "grid")
+    if not isinstance(depth_raw, list) or not depth_raw:
+        raise TableError(f"grid.depth_m: expected a non-empty list of layer depths in metres; got {depth_raw!r}"[:200])
+    depths = tuple(_float(d, f"grid.depth_m[{n}]") for n, d in enumerate(depth_raw))
+    if depths[0] < 0 or any(b <= a for a, b in zip(depths, depths[1:])):
+        raise TableError(f"grid.depth_m: expected depths >= 0, strictly increasing; got {list(depths)[:12]}")
+    n_states = len(depths) * ny * nx * N_HEADINGS
+    if n_states > MAX_STATES:
+        raise TableError(
+            f"grid: {len(depths)} x {ny} x {nx} x {N_HEADINGS} = {n_states:,} states exceeds the limit of {MAX_STATES:,}"
+        )
+    fields: dict[str, Any] = {"nx": nx, "ny": ny, "depth_m": depths}
+    for key in ("lon0_deg", "lat0_deg", "dlon_deg", "dlat_deg"):
+        fields[key] = _float(_key(g, key, "grid"), f"grid.{key}")
+    for key in ("dlon_deg", "dlat_deg"):
+        if fields[key] <= 0:
+            raise TableError(f"grid.{key}: expected a positive spacing in degrees; got {fields[key]!r}")
+    lat_n = fields["lat0_deg"] + (ny - 1) * fields["dlat_deg"]
+    if fields["lat0_deg"] < -90 or lat_n > 90:
+        raise TableError(f"grid: rows span latitudes {fields['lat0_deg']:g}..{lat_n:g}; expected them within [-90, 90]")
+    headings = _section(_key(top, "headings", ""), "headings")
+    if _key(headings, "count", "headings") != N_HEADINGS:
+        raise TableError(f"headings.count: expected {N_HEADINGS}; got {headings['count']!r}")
+    goal = _section(_key(top, "goal", ""), "goal")
+    fields.update(
+        goal_lon_deg=_float(_key(goal, "lon_deg", "goal"), "goal.lon_deg"),
+        goal_lat_deg=_float(_key(goal, "lat_deg", "goal"), "goal.lat_deg"),
+        goal_depth_m=_float(_key(goal, "depth_m", "goal"), "goal.depth_m"),
+        goal_radius_cells=_int(_key(goal, "radius_cells", "goal"), "goal.radius_cells"),
+    )
+    for key in ("criterion", "uncertainty", "model", "planner_version"):
+        fields[key] = _text(_key(top, key, ""), key)
+    costs = _section(_key(top, "costs", ""), "costs")
+    fields["costs"] = {str(k): _int(v, f"costs.{k}") for k, v in costs.items()}
+    forecast = _section(_key(top, "forecast", ""), "forecast")
+    fields["forecast_source"] = _text(_key(forecast, "source", "forecast"), "forecast.source")
+    fields["forecast_identity"] = _text(_key(forecast, "identity", "forecast"), "forecast.identity")
+    when = _key(forecast, "time", "forecast")
+    fields["forecast_time"] = None if when is None else _text(when, "forecast.time")
+    if "physical" in top:  # optional (physical plans); older readers never saw it
+        physical = _section(top["physical"], "physical")
+        fields["physical"] = {}
+        for part in ("vehicle", "sampling"):
+            values = _section(_key(physical, part, "physical"), f"physical.{part}")
+            # null: a sampling setting left to the model (max_transition_s); true/false: the switch course_offsets
+            fields["physical"][part] = {str(k): _switch(v, f"physical.{part}.{k}") if (part, k) == ("sampling", "course_offsets")
+                                        else None if v is None and part == "sampling" else
+                                        _number(v, f"physical.{part}.{k}") for k, v in values.items()}
+    return fields
+
+
+def _section(value: Any, key: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        what = f"{key}: expected a JSON object" if key else "is not a JSON object"
+        raise TableError(f"{what}; got {type(value).__name__} {repr(value)[:60]}")
+    return value
+
+
+def _key(section: dict[str, Any], key: str, parent: str) -> Any:
+    if key not in section:
+        raise TableError(f"lacks the key {f'{parent}.{key}' if parent else key!r}")
+    return section[key]
+
+
+def _text(value: Any, key: str) -> str:
+    if not isinstance(value, str):
+        raise TableError(f"{key}: expected text; got {repr(value)[:60]}")
+    return value
+
+
+def _float(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise TableError(f"{key}: expected a finite number; got {value!r}")
+    return float(value)
+
+
+def _number(value: Any, key: str) -> float | int:
+    """A finite number, kept an int when it is one (whole-number settings stay whole)."""
+    return value if isinstance(value, int) and not isinstance(value, bool) else _float(value, key)
+
+
+def _switch(value: Any, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise TableError(f"{key}: expected true or false; got {value!r}")
+    return value
+
+
+def _int(value: Any, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TableError(f"{key}: expected an integer; got {value!r}")
+    return value

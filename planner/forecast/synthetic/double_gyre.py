@@ -1,0 +1,349 @@
+"""The analytic double gyre current field, written as a CF-1.8 netCDF forecast.
+
+The time-dependent double gyre of Shadden, Lekien and Marsden, "Definition and
+properties of Lagrangian coherent structures from finite-time Lyapunov
+exponents in two-dimensional aperiodic flows", Physica D 212 (2005) 271-304.
+On the non-dimensional box ``x`` in [0, 2] (west to east), ``y`` in
+[0, 1] (south to north) the stream function is::
+
+    psi(x, y, t) = A sin(pi f(x, t)) sin(pi y)
+    f(x, t) = a(t) x^2 + b(t) x,  a = eps sin(omega t + phase),  b = 1 - 2 a
+
+with ``u = -dpsi/dy`` (east) and ``v = dpsi/dx`` (north). Two counter-rotating
+gyres (clockwise in the west, counter-clockwise in the east) fill the box; the
+line between them, where ``f = 1``, lies at ``x = 1`` when ``a = 0`` and swings
+east and west with period ``2 pi / omega`` to about ``x = 1 +- eps`` (1.099 and
+0.901 at ``eps = 0.1``). No flow crosses the box edges.
+
+Units: the box is mapped onto ``DoubleGyreSettings``' lon/lat box with the
+spec's flat metric at the box's mid latitude (``R = 6371 km``). Each axis has
+its own length scale, ``Lx`` = half the width and ``Ly`` = the height in
+metres, and the physical stream function is ``Psi0 psi(X / Lx, Y / Ly, t)``,
+so the field is exactly non-divergent in metres whatever the box. ``Psi0`` is
+chosen so that the **peak speed over the box at eps = 0** (``pi A`` in the
+non-dimensional field) is ``peak_speed_m_s``; with ``eps > 0`` the northward
+speed can reach ``(1 + 2 eps)`` times that. The default box, 37.1 km x 18.6 km,
+is 2:1 in metres (to 2e-5), so ``Lx = Ly`` and the gyres are round. ``t`` is seconds since
+``issue_time``, ``omega = 2 pi / period_h``. The field is the same at every
+depth (the classic gyre is two-dimensional) and there is no land.
+
+Forecast error: a forecast is simply another settings value. An evaluation
+takes the defaults (or any settings) as the **truth**, plans on a file written
+from a perturbed copy, e.g. ``replace(truth, eps=0.0)`` (the steady gyre: right
+on average, wrong in its oscillation), ``replace(truth, phase_rad=pi / 2)`` (a
+timing error) or ``replace(truth, peak_speed_m_s=0.4)`` (a strength error), and
+flies the vehicle in ``gyre_velocity(truth, ...)``.
+
+The file layout, CF attributes, encoding and atomic writing are those of
+``planner.forecast.synthetic.scb``, whose helpers are reused; ``planner.forecast`` reads the
+file like any model file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import math
+import os
+import pathlib
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+from numpy.typing import ArrayLike, NDArray
+
+from planner.contract.arguments import floats
+from planner.contract.atomic import atomic_target
+from planner.contract.errors import LrauvError, PlannerError
+from planner.contract.geodesy import EARTH_RADIUS_M
+from planner.forecast.synthetic.scb import _counts, _encoding, _parse_time, _with_numeric_time
+
+__all__ = [
+    "GENERATOR_VERSION",
+    "DoubleGyreSettings",
+    "box_size_m",
+    "gyre_velocity",
+    "settings_from_args",
+    "synthesize_gyre",
+    "write_gyre",
+]
+
+GENERATOR_VERSION = "1.0"
+
+_REFERENCE = (
+    "Shadden, Lekien and Marsden, Definition and properties of Lagrangian coherent structures from "
+    "finite-time Lyapunov exponents in two-dimensional aperiodic flows, Physica D 212 (2005) 271-304"
+)
+
+
+class _FieldError(PlannerError):
+    """A bad settings field; ``field`` lets ``settings_from_args`` name the command-line option."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+
+def _check(ok: object, name: str, expected: str, got: object) -> None:
+    if not ok:
+        raise _FieldError(name, f"double gyre settings: `{name}` must be {expected}; got {got!r}")
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+@dataclass(frozen=True, kw_only=True)
+class DoubleGyreSettings:
+    """Everything that determines a double gyre file; same settings, same arrays.
+
+    Grid: points on the box edges, ``linspace(west, east, nx)`` with
+    ``nx = round((east - west) / spacing_deg) + 1`` (as ``planner.forecast.synthetic.scb``);
+    the defaults give 81 x 34 points. Times: ``0, step_h, 2 step_h, ...`` up to
+    ``hours``, hour 0 at ``issue_time``. ``north_deg = 33.467`` makes the default
+    box twice as wide as tall in metres at its mid latitude (37.14 km x 18.57 km).
+    """
+
+    west_deg: float = -118.20
+    south_deg: float = 33.30
+    east_deg: float = -117.80
+    north_deg: float = 33.467
+    spacing_deg: float = 0.005
+    depths_m: tuple[float, ...] = (0.0, 5.0, 10.0, 15.0)
+    hours: float = 48.0
+    step_h: float = 1.0
+    issue_time: str = "2026-01-15T00:00:00Z"
+    peak_speed_m_s: float = 0.5
+    eps: float = 0.1
+    period_h: float = 12.0
+    phase_rad: float = 0.0
+
+    def __post_init__(self) -> None:
+        scalars = ("west_deg", "south_deg", "east_deg", "north_deg", "spacing_deg", "hours", "step_h",
+                   "peak_speed_m_s", "eps", "period_h", "phase_rad")
+        for name in scalars:
+            value = getattr(self, name)
+            field = "bbox" if name in ("west_deg", "south_deg", "east_deg", "north_deg") else name
+            _check(_is_number(value) and math.isfinite(value), field, "a finite number", value)
+            object.__setattr__(self, name, float(value))
+        _check(np.ndim(self.depths_m) == 1 and all(_is_number(d) for d in self.depths_m),
+               "depths_m", "a sequence of numbers", self.depths_m)
+        object.__setattr__(self, "depths_m", tuple(float(d) for d in self.depths_m))
+        box = (self.west_deg, self.south_deg, self.east_deg, self.north_deg)
+        _check(self.west_deg < self.east_deg and self.south_deg < self.north_deg
+               and -90.0 < self.south_deg and self.north_deg < 90.0 and self.east_deg - self.west_deg <= 360.0,
+               "bbox", "WEST < EAST and -90 < SOUTH < NORTH < 90", box)
+        _check(self.spacing_deg > 0, "spacing_deg", "a number > 0", self.spacing_deg)
+        nx, ny = _counts(self)  # type: ignore[arg-type]  # duck-typed: reads the box and spacing only
+        _check(nx >= 2 and ny >= 2, "spacing_deg", f"small enough for 2 points per axis in the box {box}",
+               self.spacing_deg)
+        depths = np.asarray(self.depths_m)
+        _check(depths.size >= 1 and bool(np.all(np.isfinite(depths))) and bool(np.all(depths >= 0))
+               and bool(np.all(np.diff(depths) > 0)),
+               "depths_m", "non-negative depths in metres, strictly increasing", self.depths_m)
+        _check(self.hours > 0, "hours", "a number > 0", self.hours)
+        _check(self.step_h > 0, "step_h", "a number > 0", self.step_h)
+        if self.step_h > self.hours:  # names both: either option may be the wrong one
+            raise _FieldError("hours, step_h", f"double gyre settings: `step_h` must be at most `hours` "
+                              f"(two time steps at least); got step_h={self.step_h:g}, hours={self.hours:g}")
+        try:
+            _parse_time(self.issue_time)
+        except LrauvError:
+            _check(False, "issue_time", "an ISO 8601 time like 2026-01-15T00:00:00Z", self.issue_time)
+        _check(self.peak_speed_m_s > 0, "peak_speed_m_s", "a speed > 0 in m/s", self.peak_speed_m_s)
+        _check(0.0 <= self.eps <= 0.5, "eps", "in [0, 0.5] (f(x, t) must stay increasing in x)", self.eps)
+        _check(self.period_h > 0, "period_h", "a period > 0 in hours", self.period_h)
+
+
+# --------------------------------------------------------------------------- field
+
+
+def box_size_m(settings: DoubleGyreSettings) -> tuple[float, float]:
+    """``(width_m, height_m)`` of the box in the flat metric at its mid latitude (R = 6371 km)."""
+    mid_lat = math.radians(0.5 * (settings.south_deg + settings.north_deg))
+    width = EARTH_RADIUS_M * math.cos(mid_lat) * math.radians(settings.east_deg - settings.west_deg)
+    height = EARTH_RADIUS_M * math.radians(settings.north_deg - settings.south_deg)
+    return width, height
+
+
+def gyre_velocity(
+    settings: DoubleGyreSettings, lon_deg: ArrayLike, lat_deg: ArrayLike, t_s: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(u_east_m_s, v_north_m_s)`` of the double gyre (Shadden et al. 2005) at any points.
+
+    ``t_s`` is seconds since ``settings.issue_time``; the arguments broadcast.
+    Points outside the box get the same analytic formula (no masking).
+    """
+    s = settings
+    lon = np.asarray(lon_deg, dtype=np.float64)
+    lat = np.asarray(lat_deg, dtype=np.float64)
+    t = np.asarray(t_s, dtype=np.float64)
+    x = 2.0 * (lon - s.west_deg) / (s.east_deg - s.west_deg)
+    y = (lat - s.south_deg) / (s.north_deg - s.south_deg)
+    omega = 2.0 * np.pi / (s.period_h * 3600.0)
+    a = s.eps * np.sin(omega * t + s.phase_rad)
+    b = 1.0 - 2.0 * a
+    f = a * x * x + b * x
+    dfdx = 2.0 * a * x + b
+    width_m, height_m = box_size_m(s)
+    lx_m, ly_m = 0.5 * width_m, height_m
+    # Psi = Psi0 psi(X/Lx, Y/Ly): u = -dPsi/dY, v = dPsi/dX; Psi0 = peak min(Lx, Ly) / pi.
+    l_min = min(lx_m, ly_m)
+    u = -s.peak_speed_m_s * (l_min / ly_m) * np.sin(np.pi * f) * np.cos(np.pi * y)
+    v = s.peak_speed_m_s * (l_min / lx_m) * np.cos(np.pi * f) * np.sin(np.pi * y) * dfdx
+    return u, v
+
+
+def _axes(settings: DoubleGyreSettings) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Longitudes ``(nx,)``, latitudes ``(ny,)`` on the box edges, and the time axis in hours."""
+    nx, ny = _counts(settings)  # type: ignore[arg-type]
+    lon = np.linspace(settings.west_deg, settings.east_deg, nx)
+    lat = np.linspace(settings.south_deg, settings.north_deg, ny)
+    n_t = int(math.floor(settings.hours / settings.step_h + 1e-9)) + 1
+    return lon, lat, np.arange(n_t, dtype=np.float64) * settings.step_h
+
+
+def synthesize_gyre(settings: DoubleGyreSettings = DoubleGyreSettings()) -> xr.Dataset:
+    """``gyre_velocity`` on the settings' grid as a CF-1.8 dataset.
+
+    Variables ``u``, ``v`` (float32, m/s) have dims ``(time, depth, lat, lon)``;
+    every layer holds the same field. The time axis is hours since ``issue_time``.
+    """
+    lon, lat, hours = _axes(settings)
+    depth = np.asarray(settings.depths_m, dtype=np.float64)
+    u, v = gyre_velocity(settings, lon[None, :], lat[:, None], hours[:, None, None] * 3600.0)
+    shape = (hours.size, depth.size, lat.size, lon.size)
+    u4 = np.broadcast_to(u[:, None].astype(np.float32), shape).copy()
+    v4 = np.broadcast_to(v[:, None].astype(np.float32), shape).copy()
+    return _dataset(settings, lon, lat, depth, hours, u4, v4)
+
+
+def write_gyre(
+    path: str | os.PathLike[str], settings: DoubleGyreSettings = DoubleGyreSettings()
+) -> pathlib.Path:
+    """Write ``synthesize_gyre(settings)`` to ``path`` as netCDF-4, atomically (``planner.contract.atomic``).
+
+    Readers never see a partial file; a failure leaves the old file, if any, and
+    no temporary file. Missing parent folders are created. Returns the path.
+    """
+    target = pathlib.Path(path)
+    ds = _with_numeric_time(synthesize_gyre(settings))
+    encoding = {name: enc for name, enc in _encoding(ds).items() if name in ds.variables}
+    with atomic_target(target) as tmp:
+        ds.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=encoding)
+    return target
+
+
+# --------------------------------------------------------------------------- dataset
+
+
+def _dataset(
+    settings: DoubleGyreSettings,
+    lon: NDArray[np.float64],
+    lat: NDArray[np.float64],
+    depth: NDArray[np.float64],
+    hours: NDArray[np.float64],
+    u: NDArray[np.float32],
+    v: NDArray[np.float32],
+) -> xr.Dataset:
+    """Wrap the arrays in CF-1.8 metadata, as ``planner.forecast.synthetic.scb`` does."""
+    issued = _parse_time(settings.issue_time)
+    origin = issued.replace(tzinfo=None)
+    times = np.datetime64(origin, "ns") + np.round(hours * 3.6e12).astype("timedelta64[ns]")
+    dims = ("time", "depth", "lat", "lon")
+    u_attrs = {"standard_name": "eastward_sea_water_velocity", "long_name": "eastward current", "units": "m s-1"}
+    v_attrs = {"standard_name": "northward_sea_water_velocity", "long_name": "northward current", "units": "m s-1"}
+    ds = xr.Dataset(
+        data_vars={"u": (dims, u, u_attrs), "v": (dims, v, v_attrs)},
+        coords={
+            "time": ("time", times, {"standard_name": "time", "long_name": "time", "axis": "T"}),
+            "depth": ("depth", depth, {"standard_name": "depth", "long_name": "depth below sea surface",
+                                       "units": "m", "positive": "down", "axis": "Z"}),
+            "lat": ("lat", lat, {"standard_name": "latitude", "long_name": "latitude",
+                                 "units": "degrees_north", "axis": "Y"}),
+            "lon": ("lon", lon, {"standard_name": "longitude", "long_name": "longitude",
+                                 "units": "degrees_east", "axis": "X"}),
+        },
+        attrs=_global_attrs(settings, issued, float(hours[-1])),
+    )
+    ds["time"].encoding.update({"units": f"hours since {origin:%Y-%m-%d %H:%M:%S}", "calendar": "standard",
+                                "dtype": "float64"})
+    return ds
+
+
+def _global_attrs(settings: DoubleGyreSettings, issued: dt.datetime, last_h: float) -> dict[str, object]:
+    """Global attributes: CF-1.8 plus ACDD discovery fields and the gyre's parameters."""
+    s = settings
+    end = issued + dt.timedelta(hours=last_h)
+    width_m, height_m = box_size_m(s)
+    stamp = "%Y-%m-%dT%H:%M:%SZ"
+    return {
+        "Conventions": "CF-1.8",
+        "title": "Analytic double gyre currents (Shadden, Lekien and Marsden 2005)",
+        "institution": "lrauv-feedback project (analytic data, not a model run)",
+        "source": f"lrauv double gyre generator v{GENERATOR_VERSION} (planner.forecast.synthetic.double_gyre)",
+        "history": f"created by planner.forecast.synthetic.double_gyre v{GENERATOR_VERSION}; deterministic, no wall-clock time",
+        "references": _REFERENCE,
+        "comment": ("psi = A sin(pi f(x,t)) sin(pi y), f = a x^2 + b x, a = eps sin(omega t + phase), b = 1 - 2a, "
+                    "x = 0..2 west to east, y = 0..1 south to north; the same at every depth; no land."),
+        "issue_time": f"{issued:{stamp}}",
+        "forecast_reference_time": f"{issued:{stamp}}",
+        "time_coverage_start": f"{issued:{stamp}}",
+        "time_coverage_end": f"{end:{stamp}}",
+        "geospatial_lat_min": s.south_deg,
+        "geospatial_lat_max": s.north_deg,
+        "geospatial_lon_min": s.west_deg,
+        "geospatial_lon_max": s.east_deg,
+        "geospatial_vertical_min": s.depths_m[0],
+        "geospatial_vertical_max": s.depths_m[-1],
+        "geospatial_vertical_positive": "down",
+        "gyre_peak_speed_m_s": s.peak_speed_m_s,
+        "gyre_eps": s.eps,
+        "gyre_period_hours": s.period_h,
+        "gyre_phase_rad": s.phase_rad,
+        "gyre_box_width_m": width_m,
+        "gyre_box_height_m": height_m,
+        "settings": repr(s),
+    }
+
+
+# --------------------------------------------------------------------------- command line
+
+# Settings field (or check name) -> the command-line option that sets it.
+_OPTIONS = {
+    "bbox": "--bbox",
+    "spacing_deg": "--spacing-deg",
+    "depths_m": "--depths",
+    "hours": "--hours",
+    "step_h": "--step-h",
+    "hours, step_h": "--hours/--step-h",
+    "issue_time": "--issue-time",
+    "peak_speed_m_s": "--peak-speed-m-s",
+    "eps": "--eps",
+    "period_h": "--period-h",
+    "phase_rad": "--phase-rad",
+}
+
+
+def settings_from_args(args: argparse.Namespace) -> DoubleGyreSettings:
+    """``DoubleGyreSettings`` from ``lrauv forecast gyre``'s options (planner/cli.py); bad values raise ``PlannerError`` naming the option."""
+    kwargs: dict[str, object] = {}
+    for name in ("peak_speed_m_s", "eps", "period_h", "phase_rad", "hours", "step_h", "spacing_deg", "issue_time"):
+        value = getattr(args, name, None)
+        if value is not None:
+            kwargs[name] = value
+    if getattr(args, "bbox", None) is not None:
+        kwargs.update(zip(("west_deg", "south_deg", "east_deg", "north_deg"), _floats(args.bbox, 4, "--bbox")))
+    if getattr(args, "depths", None) is not None:
+        kwargs["depths_m"] = tuple(_floats(args.depths, None, "--depths"))
+    try:
+        return DoubleGyreSettings(**kwargs)  # type: ignore[arg-type]
+    except _FieldError as exc:
+        raise PlannerError(f"{_OPTIONS.get(exc.field, exc.field)}: {exc}") from None
+
+
+def _floats(text: str, n: int | None, option: str) -> list[float]:
+    try:
+        return floats(str(text), n, option)
+    except argparse.ArgumentTypeError as exc:
+        raise PlannerError(str(exc)) from None

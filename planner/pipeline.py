@@ -1,0 +1,356 @@
+"""The planning pipeline in one call: forecast -> grid -> transitions -> solve -> table."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.cluster import InProcess, Runner
+from planner.contract.errors import ForecastError, GridError, PlannerError
+from planner.forecast import (
+    Forecast,
+    ForecastTimes,
+    ensemble_size,
+    file_identity,
+    forecast_times,
+    nearest_time_index,
+    open_forecast,
+)
+from planner.forecast.resample import resample
+from planner.grid import Grid
+from planner.contract.geodesy import BBox
+from planner.contract.settings import Goal, PlanSettings
+from planner.paper.solve import Solution, goal_cells_on, solve
+from planner.contract.atomic import write_atomic
+from planner.contract.table import PolicyTable
+from planner.paper.transitions import TransitionModel, build_transitions
+from planner.physical.model import (
+    PhysicalModel,
+    SampleStats,
+    assemble,
+    build_physical,
+    combine,
+    fine_grid,
+    refine_factor,
+    sample_transitions,
+)
+from planner.physical.solve import PhysicalSolution, solve_physical
+
+if TYPE_CHECKING:
+    from planner.contract.mission import Mission
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlanRequest:
+    """Everything a plan depends on. ``bbox``/``nx``/``ny`` None: the forecast's own grid."""
+
+    forecast_path: Path
+    goal: Goal
+    depths_m: tuple[float, ...]
+    settings: PlanSettings = PlanSettings()
+    bbox: BBox | None = None
+    nx: int | None = None
+    ny: int | None = None
+    time_index: int | None = None
+    time_iso: str | None = None
+    variables: tuple[str, str] | None = None
+    grid_file: Path | None = None
+    ensemble: tuple[Path, ...] = ()  # further forecast files: members of an ensemble (physical model)
+    members: tuple[MemberRef, ...] | None = None  # explicit members, instead of every member of the files
+
+    @classmethod
+    def for_mission(cls, mission: Mission, forecast_path: Path, *, goal_index: int = 0) -> PlanRequest:
+        """One goal of a mission: its region, settings, forecast step and variables (no flag overrides)."""
+        m = mission
+        return cls(forecast_path=forecast_path, goal=m.goals[goal_index].goal, depths_m=m.region.depths_m,
+                   settings=m.settings, bbox=m.region.bbox, nx=m.region.nx, ny=m.region.ny,
+                   time_index=m.forecast.time_index, time_iso=m.forecast.time_iso,
+                   variables=m.forecast.variables, grid_file=m.forecast.grid_file)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PlanResult:
+    """The products of one plan, and how long each stage took (seconds)."""
+
+    forecast: Forecast
+    time_index: int
+    grid: Grid
+    u_m_s: NDArray[np.float64]
+    v_m_s: NDArray[np.float64]
+    model: TransitionModel | PhysicalModel
+    solution: Solution | PhysicalSolution
+    table: PolicyTable
+    timings_s: dict[str, float]
+
+
+def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
+    """The request's grid, or the forecast's own regular grid when no bbox is given (spec section 1)."""
+    if request.bbox is not None:
+        if request.nx is None or request.ny is None:
+            raise GridError("grid: a bbox needs --nx and --ny")
+        return Grid.from_bbox(request.bbox, nx=request.nx, ny=request.ny, depths_m=list(request.depths_m))
+    lon, lat = forecast.lon_deg, forecast.lat_deg
+    if lon.ndim != 1:
+        raise GridError(
+            f"{forecast.source}: the forecast grid is curvilinear; give --bbox WEST,SOUTH,EAST,NORTH with --nx and --ny"
+        )
+    bbox = BBox(west_deg=float(lon[0]), south_deg=float(lat[0]), east_deg=float(lon[-1]), north_deg=float(lat[-1]))
+    return Grid.from_bbox(
+        bbox, nx=request.nx or lon.size, ny=request.ny or lat.size, depths_m=list(request.depths_m)
+    )
+
+
+def native_spacing_deg(forecast: Forecast) -> float | None:
+    """The forecast's own lon/lat spacing (the finer), or None for a curvilinear grid."""
+    lon, lat = forecast.file_lon_lat  # the whole file's axes, also for a window (open_forecast(bbox=))
+    if lon.ndim != 1 or lon.size < 2 or lat.size < 2:
+        return None
+    return float(min(np.abs(np.diff(lon)).min(), np.abs(np.diff(lat)).min()))
+
+
+def check_coverage(forecast: Forecast, grid: Grid) -> None:
+    """Refuse a bbox that lies wholly outside the forecast's longitude/latitude range."""
+    lon, lat = forecast.lon_deg, forecast.lat_deg
+    b = grid.bbox
+    if b.east_deg < np.nanmin(lon) or b.west_deg > np.nanmax(lon) or b.north_deg < np.nanmin(lat) or b.south_deg > np.nanmax(lat):
+        raise GridError(
+            f"bbox {b.west_deg:g},{b.south_deg:g},{b.east_deg:g},{b.north_deg:g} lies outside the forecast "
+            f"{forecast.source}, which covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, "
+            f"lat {np.nanmin(lat):.4f}..{np.nanmax(lat):.4f}"
+        )
+
+
+def choose_time_index(forecast: Forecast | ForecastTimes, request: PlanRequest) -> int:
+    """``--time-index`` by position, or the step nearest to ``--time``; default the first step."""
+    if request.time_iso is not None:
+        try:
+            when = np.datetime64(request.time_iso.rstrip("Z"), "s")
+        except ValueError:
+            raise ForecastError(f"time: expected an ISO 8601 time like 2026-01-15T06:00:00Z; got {request.time_iso!r}") from None
+        return nearest_time_index(forecast, when)
+    index = 0 if request.time_index is None else request.time_index
+    if not 0 <= index < forecast.time_s.size:
+        raise ForecastError(
+            f"{forecast.source}: time index {index} is out of range; the file has {forecast.time_s.size} "
+            f"steps (0..{forecast.time_s.size - 1})"
+        )
+    return index
+
+
+def forecast_time_iso(forecast: Forecast, index: int) -> str | None:
+    """The step's time in ISO 8601 UTC, or None when the file gives no reference date."""
+    if forecast.time_origin is None:
+        return None
+    origin = np.datetime64(forecast.time_origin.rstrip("Z"), "s")
+    return str(origin + np.timedelta64(int(round(forecast.time_s[index])), "s")) + "Z"
+
+
+@dataclass(frozen=True, kw_only=True)
+class MemberRef:
+    """One forecast member: a file, and the index along its member dimension (None: the file has none)."""
+
+    path: Path
+    member: int | None = None
+
+    @property
+    def label(self) -> str:
+        return f"{self.path}" if self.member is None else f"{self.path}[member {self.member}]"
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class MemberTask:
+    """What a worker needs to sample one member (docs/scale-out.md): small, picklable, no arrays of currents."""
+
+    ref: MemberRef
+    time_index: int
+    grid: Grid
+    refine: int
+    settings: PlanSettings
+    goal_mask: NDArray[np.bool_]
+    variables: tuple[str, str] | None = None
+    grid_file: Path | None = None
+
+
+def members_of(request: PlanRequest) -> list[MemberRef]:
+    """The request's forecast members: every file, and every member of a file with a member dimension."""
+    if request.members is not None:
+        return list(request.members)
+    refs: list[MemberRef] = []
+    for path in (request.forecast_path, *request.ensemble):
+        n = ensemble_size(path, variables=request.variables)
+        refs.extend([MemberRef(path=Path(path))] if n == 1 else [MemberRef(path=Path(path), member=k) for k in range(n)])
+    return refs
+
+
+def sample_member(task: MemberTask) -> SampleStats:
+    """One task: open one member (only the step and the region needed), resample it, sample its transitions."""
+    fine = fine_grid(task.grid, task.refine)
+    forecast = open_forecast(task.ref.path, variables=task.variables, grid_file=task.grid_file, member=task.ref.member,
+                             bbox=fine.bbox, time_index=task.time_index)
+    uf, vf = resample(forecast, fine, time_index=forecast.step_index(task.time_index))
+    return sample_transitions(uf, vf, task.grid, task.settings, refine=task.refine, goal_mask=task.goal_mask)
+
+
+def open_step(request: PlanRequest, ref: MemberRef) -> tuple[Forecast, int]:
+    """A member's forecast opened at the request's step only, and that step's index in the file.
+
+    The time axis alone first (cheap for any file size), then only that step, the member and,
+    with a bbox, the region around it (docs/forecasts-large.md).
+    """
+    index = choose_time_index(forecast_times(ref.path, variables=request.variables), request)
+    forecast = open_forecast(ref.path, variables=request.variables, grid_file=request.grid_file,
+                             member=ref.member, bbox=request.bbox, time_index=index)
+    return forecast, index
+
+
+def member_tasks(request: PlanRequest, *, first: Forecast | None = None) -> list[MemberTask]:
+    """The sampling tasks of a physical plan over the request's members (the first member sets grid and step)."""
+    refs = members_of(request)
+    if first is None:
+        first, index = open_step(request, refs[0])
+    elif first.window is not None and first.window.time_index is not None:
+        index = first.window.time_index  # a one-step window (open_forecast(time_index=)): its step
+    else:
+        index = choose_time_index(first, request)
+    grid = planning_grid(first, request)
+    check_coverage(first, grid)
+    refine = refine_factor(grid, native_spacing_deg(first))
+    u, v = resample(first, grid, time_index=first.step_index(index))
+    goal_mask = _goal_mask(grid, u, v, request.goal, first.source)
+    return [MemberTask(ref=r, time_index=index, grid=grid, refine=refine, settings=request.settings, goal_mask=goal_mask,
+                       variables=request.variables, grid_file=request.grid_file) for r in refs]
+
+
+def _goal_mask(grid: Grid, u: NDArray[np.float64], v: NDArray[np.float64], goal: Goal, source: str) -> NDArray[np.bool_]:
+    """The goal cells on the planning grid's water (the physical model ends samples on entering them)."""
+    water = np.isfinite(u) & np.isfinite(v)
+    if not water.any():
+        raise GridError(f"{source}: no water on the planning grid")
+    return goal_cells_on(grid, water, goal).mask
+
+
+def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progress: bool = False,
+              runner: Runner | None = None) -> PlanResult:
+    """Run the whole pipeline. Raises a PlannerError subclass on bad input.
+
+    Several forecast members (``request.ensemble``, a member dimension, ``request.members``)
+    are outcomes of the physical model: each member is sampled as a task of ``runner``
+    (default: here), and their samples together make the transitions (docs/scale-out.md).
+    """
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
+    if len(refs) > 1:
+        return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)
+    if forecast is None:
+        forecast, index = open_step(request, refs[0])
+    else:
+        index = choose_time_index(forecast, request)
+    step = forecast.step_index(index)  # index into forecast.time_s: 0 for a one-step window
+    timings["load_s"] = time.perf_counter() - t
+    grid = planning_grid(forecast, request)
+    check_coverage(forecast, grid)
+    _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states")
+    model: TransitionModel | PhysicalModel
+    solution: Solution | PhysicalSolution
+    if request.settings.model == "physical":
+        t = time.perf_counter()
+        refine = refine_factor(grid, native_spacing_deg(forecast))
+        uf, vf = resample(forecast, fine_grid(grid, refine), time_index=step)
+        u, v = uf[:, ::refine, ::refine], vf[:, ::refine, ::refine]
+        timings["resample_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        goal_mask = _goal_mask(grid, u, v, request.goal, forecast.source)
+        model = build_physical(uf, vf, grid, request.settings, refine=refine, goal_mask=goal_mask)
+        timings["transitions_s"] = time.perf_counter() - t
+        _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each, "
+                        f"currents {refine}x finer than the grid")
+        solution = solve_physical(model, request.goal)
+        timings["plan_s"] = time.perf_counter() - t
+    else:
+        t = time.perf_counter()
+        u, v = resample(forecast, grid, time_index=step)
+        timings["resample_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        model = build_transitions(u, v, grid, request.settings)
+        solution = solve(model, request.goal, progress=progress)
+        timings["plan_s"] = time.perf_counter() - t
+    table = PolicyTable.from_solution(
+        solution,
+        forecast_source=forecast.source,
+        forecast_identity=forecast.identity,
+        forecast_time=forecast_time_iso(forecast, step),
+    )
+    return PlanResult(
+        forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=model,
+        solution=solution, table=table, timings_s=timings,
+    )
+
+
+def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runner, progress: bool) -> PlanResult:
+    if request.settings.model != "physical":
+        raise PlannerError(f"an ensemble of {len(refs)} forecast members needs the physical model (members are its "
+                           f"outcomes; the paper model has none): give --model physical or one forecast")
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    first, index = open_step(request, refs[0])
+    tasks = member_tasks(request, first=first)
+    timings["load_s"] = time.perf_counter() - t
+    timings["resample_s"] = 0.0  # in the member tasks
+    grid, index = tasks[0].grid, tasks[0].time_index
+    _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states; "
+                    f"{len(refs)} forecast members")
+    t = time.perf_counter()
+    stats = runner.map(sample_member, tasks)
+    timings["transitions_s"] = time.perf_counter() - t
+    model = assemble(combine(stats), grid, request.settings, refine=tasks[0].refine)
+    _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each "
+                    f"from {model.members} members")
+    solution = solve_physical(model, request.goal)
+    timings["plan_s"] = time.perf_counter() - t
+    files = {refs[0].path: first.identity}  # each file hashed once, however many members it holds
+    for r in refs:
+        if r.path not in files:
+            files[r.path] = file_identity(r.path)
+    identity = "ensemble:" + hashlib.sha256(
+        "|".join(f"{r.member}@{files[r.path]}" for r in refs).encode()).hexdigest()[:16]
+    table = PolicyTable.from_solution(
+        solution, forecast_source=" + ".join(r.label for r in refs)[:2000], forecast_identity=identity,
+        forecast_time=forecast_time_iso(first, first.step_index(index)),
+    )
+    u, v = resample(first, grid, time_index=first.step_index(index))  # the first member's, for pictures
+    return PlanResult(forecast=first, time_index=index, grid=grid, u_m_s=u, v_m_s=v,
+                      model=model, solution=solution, table=table, timings_s=timings)
+
+
+def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:
+    """Write the arrays of spec section 8 to an ``.npz``, atomically."""
+    sol = result.solution
+    buf = io.BytesIO()
+    arrays = dict(
+        cost=np.ascontiguousarray(sol.cost),
+        steps=np.ascontiguousarray(sol.steps).astype(np.int64),
+        action=np.ascontiguousarray(sol.action).astype(np.uint8),
+        lon=result.grid.lon_deg,
+        lat=result.grid.lat_deg,
+        depth=result.grid.depth_m,
+        flow_dir=np.asarray(result.model.flow_dir, dtype=np.int8),
+    )
+    if isinstance(sol, PhysicalSolution):  # cost in Wh and the time to go, s (docs/physical-model.md)
+        arrays["time_s"] = np.ascontiguousarray(sol.time_s)
+    np.savez_compressed(buf, **arrays)
+    return write_atomic(path, buf.getvalue())
+
+
+def _note(progress: bool, text: str) -> None:
+    if progress:
+        print(f"  {text}", file=sys.stderr, flush=True)

@@ -1,0 +1,170 @@
+"""``lrauv batch``: a plan for every goal of many missions, as parallel tasks (docs/scale-out.md).
+
+Arguments are mission files or fleet files. A fleet file lists vehicles and their missions::
+
+    fleet:
+      - {vehicle: tethys, mission: demo.yaml}
+      - {vehicle: daphne, mission: demo-physical.yaml}
+
+(paths relative to the fleet file). Every goal of every mission is one task: the task gets
+the plan request (forecast path, grid, goal, settings), plans it with ``make_plan`` and returns
+the table's bytes; this process writes ``OUT/<vehicle>/goal-<n>.lrpt`` atomically. Forecast files
+must be readable where the workers run (a shared filesystem for a remote cluster).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from planner.contract.atomic import write_atomic
+from planner.cluster import add_arguments as add_cluster_arguments
+from planner.contract.errors import LrauvError, MissionError, ShoreError
+
+MAX_FLEET_BYTES = 1 << 20
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchItem:
+    """One goal to plan: for which vehicle, which goal of its mission, and where the table goes."""
+
+    vehicle: str
+    goal_index: int
+    request: object  # planner.pipeline.PlanRequest (imported lazily: building the parser stays light)
+    out: Path
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchResult:
+    vehicle: str
+    goal_index: int
+    table: bytes | None
+    reachable: int
+    water_states: int
+    plan_s: float
+    error: str | None = None
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser("batch", help="plan every goal of many missions (or a fleet file) as parallel tasks")
+    p.add_argument("files", type=Path, nargs="+", help="mission YAML files and/or fleet YAML files")
+    p.add_argument("--forecast", type=Path, help="plan every mission on this forecast (default: each mission's)")
+    p.add_argument("--out", type=Path, required=True, help="directory for OUT/<vehicle>/goal-<n>.lrpt")
+    add_cluster_arguments(p)
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
+def load_fleet(path: Path) -> list[tuple[str, Path]]:
+    """(vehicle name, mission path) of each entry of a fleet file; errors name file, line and key."""
+    from planner.contract.mission import _Doc, _Section
+
+    try:
+        size = path.stat().st_size
+        if size > MAX_FLEET_BYTES:
+            raise MissionError(f"{path}: {size:,} bytes; a fleet file is at most {MAX_FLEET_BYTES:,} bytes")
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise MissionError(f"{path}: no such fleet file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MissionError(f"{path}: cannot read: {exc}") from None
+    doc = _Doc(path, text)
+    top = _Section(doc, doc.root, "", {"fleet"})
+    entries = top.raw("fleet")
+    if not isinstance(entries, list) or not entries:
+        raise doc.error("fleet", f"expected a list of {{vehicle: NAME, mission: FILE}}; got {entries!r}")
+    out: list[tuple[str, Path]] = []
+    seen: set[str] = set()
+    for n, raw in enumerate(entries):
+        e = _Section(doc, raw, f"fleet[{n}]", {"vehicle", "mission"})
+        name = e.text("vehicle")
+        if not name or "/" in name or name in (".", ".."):
+            raise doc.error(e.path("vehicle"), f"expected a vehicle name usable as a folder name; got {name!r}")
+        if name in seen:
+            raise doc.error(e.path("vehicle"), f"vehicle {name!r} is listed twice")
+        seen.add(name)
+        out.append((name, path.parent / e.text("mission")))
+    return out
+
+
+def is_fleet(path: Path) -> bool:
+    """A fleet file has a top-level ``fleet`` key (a mission never does)."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = fh.read(MAX_FLEET_BYTES + 1)
+        doc = yaml.safe_load(head)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False  # the mission loader gives the precise error
+    return isinstance(doc, dict) and "fleet" in doc
+
+
+def collect(files: list[Path], out_dir: Path, forecast: Path | None) -> list[BatchItem]:
+    """Every goal of every mission named directly or through a fleet file."""
+    from planner.cli import _mission_forecast
+    from planner.contract.mission import load_mission
+    from planner.pipeline import PlanRequest
+
+    vehicles: list[tuple[str, Path]] = []
+    for f in files:
+        vehicles.extend(load_fleet(f) if is_fleet(f) else [(f.stem, f)])
+    names = [v for v, _ in vehicles]
+    dupes = sorted({v for v in names if names.count(v) > 1})
+    if dupes:
+        raise ShoreError(f"batch: vehicle names must be unique (they name the output folders); repeated: {', '.join(dupes)}")
+    items = []
+    for vehicle, path in vehicles:
+        mission = load_mission(path)
+        fc = forecast or _mission_forecast(mission, out_dir=out_dir)
+        for g in range(len(mission.goals)):
+            request = PlanRequest.for_mission(mission, fc, goal_index=g)
+            items.append(BatchItem(vehicle=vehicle, goal_index=g, request=request,
+                                   out=out_dir / vehicle / f"goal-{g}.lrpt"))
+    return items
+
+
+def plan_item(item: BatchItem) -> BatchResult:
+    """One task: plan one goal. Bad input comes back as an error, so one bad goal stops nothing else."""
+    from planner.pipeline import make_plan
+
+    t = time.perf_counter()
+    try:
+        result = make_plan(item.request)  # type: ignore[arg-type]
+    except LrauvError as exc:
+        return BatchResult(vehicle=item.vehicle, goal_index=item.goal_index, table=None, reachable=0,
+                           water_states=0, plan_s=time.perf_counter() - t, error=str(exc))
+    return BatchResult(
+        vehicle=item.vehicle, goal_index=item.goal_index, table=result.table.to_bytes(),
+        reachable=int(result.solution.reachable.sum()), water_states=int(result.model.water.sum()) * 8,
+        plan_s=time.perf_counter() - t,
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.cluster import open_runner
+
+    items = collect(list(args.files), args.out, args.forecast)
+    t0 = time.perf_counter()
+    with open_runner(args.scheduler, workers=args.workers) as runner:
+        if not args.quiet:
+            print(f"  {len(items)} goals, {runner.describe()}", file=sys.stderr, flush=True)
+        results = runner.map(plan_item, items)
+    failed = 0
+    for item, r in zip(items, results):
+        if r.error is not None:
+            failed += 1
+            print(f"failed     {r.vehicle} goal {r.goal_index}: {r.error}")
+            continue
+        assert r.table is not None
+        path = write_atomic(item.out, r.table)
+        print(f"table      {os.fspath(path)}  ({len(r.table):,} bytes; reachable {r.reachable:,} of "
+              f"{r.water_states:,} water states; {r.plan_s:.2f} s)")
+    print(f"batch      {len(items) - failed} of {len(items)} goals planned in {time.perf_counter() - t0:.1f} s")
+    if failed:
+        raise ShoreError(f"batch: {failed} of {len(items)} goals could not be planned (listed above)")
+    return 0
+
