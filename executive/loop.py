@@ -93,7 +93,7 @@ class Executive:
     def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *,
                  table_bytes: Mapping[int, bytes] | None = None,
                  metadata: dict[str, dict[str, str]] | None = None) -> None:
-        from pymavlink import mavutil  # transport only; encoding and parsing are the bridge's
+        from pymavlink import mavutil  # transport classes only; encoding and parsing are the bridge's
 
         self.config = config
         if isinstance(table, PolicyTable):
@@ -104,13 +104,13 @@ class Executive:
         self.streams = None if config.signing is None else signing.Streams(config.signing)
         self.signature_refusals: dict[signing.Verdict, int] = {}
         self._refusal_logs: dict[tuple[signing.Verdict, signing.Link], signing.RefusalLog] = {}
-        self.conn = mavutil.mavlink_connection(config.link, source_system=bridge.EXECUTIVE_SYSTEM,
-                                               source_component=bridge.EXECUTIVE_COMPONENT)
+        self.conn = bridge.open_link(config.link, source_system=bridge.EXECUTIVE_SYSTEM,
+                                     source_component=bridge.EXECUTIVE_COMPONENT)
         self.mav = bridge.new_mav(self.conn, streams=self.streams, link_id=signing.LINK_ID_AUTOPILOT)
         self.gcs = None
         if config.gcs_link is not None:
-            self.gcs = mavutil.mavlink_connection(config.gcs_link, source_system=bridge.EXECUTIVE_SYSTEM,
-                                                  source_component=bridge.EXECUTIVE_COMPONENT)
+            self.gcs = bridge.open_link(config.gcs_link, source_system=bridge.EXECUTIVE_SYSTEM,
+                                        source_component=bridge.EXECUTIVE_COMPONENT)
             self.gcs_mav = bridge.new_mav(self.gcs, streams=self.streams, link_id=signing.LINK_ID_GROUND_STATION)
         # UDP carries whole frames in each datagram: the parser starts afresh with each, so the tail of
         # a cut frame can never join the next datagram's bytes into a frame nobody sent (TCP is a stream).

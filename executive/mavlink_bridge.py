@@ -12,18 +12,15 @@ signs what it sends and gives every message it decodes a ``signature`` verdict
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
-os.environ.setdefault("MAVLINK20", "1")  # MAVLink 2 framing (pymavlink reads this at import)
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
-
-from executive.signing import Streams, Verdict, is_signed, timestamp_at  # noqa: E402
-from executive.state import (  # noqa: E402
+from executive.signing import Streams, Verdict, is_signed, timestamp_at
+from executive.state import (
     Arm,
     Command,
     DepthTarget,
@@ -52,6 +49,24 @@ _UNKNOWN_HDG = 65535
 _STATUSTEXT_LEN = 50
 _SEVERITY = {"debug": mavlink.MAV_SEVERITY_DEBUG, "info": mavlink.MAV_SEVERITY_INFO,
              "warning": mavlink.MAV_SEVERITY_WARNING, "error": mavlink.MAV_SEVERITY_ERROR}
+
+
+def open_link(address: str, *, source_system: int, source_component: int) -> Any:
+    """A pymavlink connection (``mavutil.mavlink_connection``) that speaks MAVLink 2 from its first frame.
+
+    mavutil picks its dialect module from the ``MAVLINK20`` environment variable when it is
+    imported; instead of setting that for the whole process, the connection gets a MAVLink 2
+    encoder/parser of its own, and is marked as already switched so that mavutil's protocol
+    auto-detection leaves it (and the environment) alone.
+    """
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(address, source_system=source_system, source_component=source_component)
+    conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
+    conn.mav.robust_parsing = True
+    conn.WIRE_PROTOCOL_VERSION = mavlink.WIRE_PROTOCOL_VERSION
+    conn.first_byte = False
+    return conn
 
 
 def new_mav(sink: Any, *, system: int = EXECUTIVE_SYSTEM, component: int = EXECUTIVE_COMPONENT,

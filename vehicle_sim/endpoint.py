@@ -17,7 +17,6 @@ currents in ``world``; this module only moves bytes and clocks.
 from __future__ import annotations
 
 import math
-import os
 import random
 import select
 import socket
@@ -27,11 +26,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-os.environ["MAVLINK20"] = "1"  # MAVLink 2 framing (pymavlink reads this at import)
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
-
-from vehicle_sim.autopilot import (  # noqa: E402
+from vehicle_sim.autopilot import (
     DEFAULT_INTERVALS_S,
     Ack,
     Autopilot,
@@ -43,9 +40,9 @@ from vehicle_sim.autopilot import (  # noqa: E402
     Text,
     clip_text,
 )
-from vehicle_sim.dynamics import Body, Reading, battery_remaining, observe, power_w, step  # noqa: E402
+from vehicle_sim.dynamics import Body, Reading, battery_remaining, observe, power_w, step
 from planner.contract.vehicle import VehicleParams
-from vehicle_sim.world import Truth  # noqa: E402
+from vehicle_sim.world import Truth
 
 SYSTEM_ID = 1
 COMPONENT_ID = mavlink.MAV_COMP_ID_AUTOPILOT1  # 1

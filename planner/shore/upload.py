@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import io
-import os
 import sys
 import tempfile
 from pathlib import Path
@@ -135,11 +134,10 @@ def _plan_goal(mission_path: Path, goal, forecast: Path | None, out: Path) -> by
 
 
 def _connect(address: str):  # type: ignore[no-untyped-def]
-    os.environ.setdefault("MAVLINK20", "1")
-    from pymavlink import mavutil
+    from executive.mavlink_bridge import open_link
 
     try:
-        return mavutil.mavlink_connection(address, source_system=GCS_SYSTEM, source_component=GCS_COMPONENT)
+        return open_link(address, source_system=GCS_SYSTEM, source_component=GCS_COMPONENT)
     except OSError as exc:
         raise ShoreError(f"--to {address}: cannot open: {exc}") from None
 
