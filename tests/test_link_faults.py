@@ -307,8 +307,15 @@ def test_the_failsafe_fires_beyond_the_link_loss_timeout(demo_plan, synthetic_fo
 
 
 def test_a_silence_right_after_set_up_is_noticed_after_the_timeout(demo_plan, synthetic_forecast, tmp_path):
-    """The downlink goes silent as soon as the vehicle is in GUIDED: link lost after 30 s of vehicle time."""
-    speedup = 200.0
+    """The downlink goes silent as soon as the vehicle is in GUIDED: link lost after 30 s of the executive's time.
+
+    Through a silence the executive extrapolates vehicle time at the rate it measured before
+    (``executive.clock``), so SURFACE is due after ``timeout * speedup / rate`` of the simulator's
+    time. The test holds the executive to that, and holds the rate to a measured one (a clock
+    left at its 1x guess would wait 20 times too long). How close the measured rate is to the
+    true speedup depends on how busy the machine is, so that is not asserted here.
+    """
+    speedup = 20.0
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "1", "--speedup", f"{speedup:g}",
               "--heartbeat-timeout-s", "0")
@@ -319,12 +326,17 @@ def test_a_silence_right_after_set_up_is_noticed_after_the_timeout(demo_plan, sy
         assert wait_until(lambda: proxy.mode() == SubMode.GUIDED, 30), proxy.modes[-3:]
         proxy.cut(up=False, down=True)
         t0 = proxy.vehicle_s()
-        _watch(proxy, ex, t0 + LINK_LOSS_TIMEOUT_S + 5.0, set())
+        # Until SURFACE is asked for (then judged by when), or well past the time it was due.
+        assert wait_until(lambda: any(m == SubMode.SURFACE for t, m in proxy.mode_requests if t >= t0)
+                          or proxy.vehicle_s() >= t0 + 3 * LINK_LOSS_TIMEOUT_S, 60)
     finally:
         _stop_rig(sim, proxy, ex)
     surface_requests = [t - t0 for t, m in proxy.mode_requests if t >= t0 and m == SubMode.SURFACE]
     print(f"\nrate at the cut {ex.executive.clock.rate:.1f}, SURFACE asked at {surface_requests[:1]} s after it")
-    assert surface_requests and surface_requests[0] <= LINK_LOSS_TIMEOUT_S + 3.0, surface_requests
+    rate = ex.executive.clock.rate
+    assert rate > 0.25 * speedup, rate  # measured, not the 1x guess
+    due_s = LINK_LOSS_TIMEOUT_S * speedup / rate
+    assert surface_requests and due_s - 3.0 <= surface_requests[0] <= due_s + 3.0, (surface_requests, due_s)
 
 
 def test_the_telemetry_rates_asked_for_are_in_force_after_lost_requests(demo_plan, synthetic_forecast, tmp_path):
