@@ -1,4 +1,4 @@
-"""Benchmarks of the closed loop (issue 2, point 6); figures go to docs/benchmarks.md.
+"""Benchmarks of the closed loop (decision latency and throughput); figures go to docs/benchmarks.md.
 
 1. Decision latency per telemetry message: parse one GLOBAL_POSITION_INT or
    ATTITUDE datagram, update the vehicle state, run the helm, encode and send the

@@ -1,4 +1,4 @@
-"""MAVLink fuzzing at scale: a million frames into the executive and a million into the simulator (issue 5).
+"""MAVLink fuzzing at scale: a million frames into the executive and a million into the simulator.
 
 Not a test (tests/test_fuzz_mavlink.py runs the same checks on tens of thousands).
 Every frame is a real datagram over UDP on 127.0.0.1 into the real input path

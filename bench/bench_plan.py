@@ -1,4 +1,4 @@
-"""Benchmark ``plan`` (transitions + solve + policy) at the sizes of issue 7, both criteria.
+"""Benchmark ``plan`` (transitions + solve + policy) at the paper size up to 16 M states, both criteria.
 
 Not a test. Each case runs in its own process so that peak memory is its own;
 the field is the synthetic Southern California Bight forecast sampled at the

@@ -1,4 +1,4 @@
-"""Soak benchmark: a 7-day simulated mission at speedup, replanning every 24 h (issue 5). Not a test.
+"""Soak benchmark: a 7-day simulated mission at speedup, replanning every 24 h. Not a test.
 
 ``lrauv sim`` and ``lrauv exec`` run as processes over UDP on loopback, as in
 ``make demo``, on an 8-day synthetic forecast. The mission is the demo's with a

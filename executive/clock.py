@@ -2,8 +2,8 @@
 
 All executive timing (heartbeat pacing, target refresh, timeouts, link loss)
 runs on the autopilot's ``time_boot_ms``, so the executive works unchanged at
-any simulator speedup (research/executive-anchors.md section 2.2: SITL's
-time_boot_ms scales with ``--speedup``). Between messages, and during a link
+any simulator speedup (ArduPilot SITL's time_boot_ms scales with its
+``--speedup``). Between messages, and during a link
 silence, vehicle time is extrapolated from wall time at the rate observed so
 far, so the heartbeat keeps its 1 Hz in vehicle time and a silent link is
 noticed after the right number of vehicle seconds.

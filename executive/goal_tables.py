@@ -1,8 +1,7 @@
 """The onboard mission plan: the goal list, one policy table per goal, and which goal is active.
 
 Pure values and functions; the loop (``executive.loop``) owns the one ``MissionPlan`` in use
-and replaces it whole, between two decisions, so a decision never sees half a change
-(issue 3: "swapped in atomically at a decision boundary").
+and replaces it whole, between two decisions, so a decision never sees half a change.
 
 Every table that arrives (uploaded over MAVLink FTP, planned onboard after a new forecast,
 or given on the command line) goes through ``check_table`` first: a table whose bytes fail

@@ -1,4 +1,4 @@
-"""Decision latency, measured in the running executive (issue 2, point 6).
+"""Decision latency, measured in the running executive (docs/benchmarks.md).
 
 A fixed histogram with 1 us bins (the last bin collects everything slower), so
 a week-long mission costs a constant 80 kB and percentiles are exact to 1 us.

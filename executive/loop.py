@@ -7,7 +7,7 @@ decisions, commands, events, raw MAVLink both ways) goes to the MCAP log.
 Timing is vehicle time (``executive.clock``), so the loop is the same at any
 simulator speedup.
 
-Uploads (issue 3) arrive on the ground-station link (``gcs_link``) or through the
+Uploads arrive on the ground-station link (``gcs_link``) or through the
 autopilot: goals by the mission protocol (``executive.mission_protocol``), tables and
 forecasts by MAVLink FTP (``executive.ftp``). New tables, uploaded or planned onboard
 (``executive.replanner``), are checked (``executive.goal_tables``) and swapped in whole just

@@ -2,8 +2,8 @@
 
 Telemetry from the autopilot becomes ``VehicleState`` updates (degE7, mm, cdeg,
 cm/s converted here and nowhere else), and ``Command`` objects become MAVLink
-messages with ArduSub's conventions (research/executive-anchors.md sections
-2.1 to 2.3, research/ardusub-sitl-facts.md). This is the executive's only
+messages with ArduSub's conventions (MAVLink common.xml and ArduSub's GCS_MAVLink
+handlers, as observed on ArduSub SITL). This is the executive's only
 pymavlink import. With a signing key, ``new_mav`` gives a ``SigningMAVLink``: it
 signs what it sends and gives every message it decodes a ``signature`` verdict
 (``executive.signing``).

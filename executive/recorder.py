@@ -6,7 +6,7 @@ panel, ``foxglove.LocationFix``) and the events (Log panel, ``foxglove.Log``)
 without configuration. Log times are vehicle time since boot (``time_boot_ms``,
 as ``executive.clock`` extrapolates it); publish times are the wall clock.
 
-Crash safety (research/executive-anchors.md section 3.2): records go into small
+Crash safety: records go into small
 chunks and the loop calls ``maybe_flush`` every iteration, so a SIGKILL loses at
 most ``flush_interval_s`` of data. The killed file has no footer and the
 indexed reader refuses it; ``recover`` stream-reads every complete record and

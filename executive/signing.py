@@ -1,4 +1,4 @@
-"""MAVLink 2 message signing: the key, the clock, and which frames the executive accepts (issue 5).
+"""MAVLink 2 message signing: the key, the clock, and which frames the executive accepts.
 
 A signed MAVLink 2 frame has bit 0x01 of its incompatibility flags set and 13 more bytes
 (mavlink.io, "Message Signing"): the sender's link id (1 byte), a timestamp (6 bytes,

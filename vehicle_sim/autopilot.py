@@ -2,9 +2,8 @@
 
 No sockets and no pymavlink: ``vehicle_sim.endpoint`` decodes messages into calls on an
 ``Autopilot`` and encodes what it returns (``Ack``, ``Text``, ``Interval``, ``SendOnce``).
-All times are simulated seconds since boot. What ArduSub does is taken from
-research/ardusub-sitl-facts.md (observed on ArduSub SITL) and research/executive-anchors.md
-section 2.3 (ArduSub's GCS_MAVLink handlers):
+All times are simulated seconds since boot. What ArduSub does was observed on ArduSub SITL
+and read in ArduSub's GCS_MAVLink handlers:
 
 - boots in MANUAL, disarmed; GUIDED is refused ("GUIDED requires position") until the EKF has
   a position, ``position_delay_s`` (41 s on SITL) after boot;

@@ -28,7 +28,7 @@ from planner.contract.errors import LrauvError, SimulatorError
 EXIT_BAD_INPUT = 2
 READY_PREFIX = "lrauv sim: listening on udp "
 FAILSAFE_CHOICES = ("surface", "alt_hold", "disarm", "warn")
-# ArduSub's autotest start location (research/executive-anchors.md 2.8), used with --calm.
+# ArduSub's autotest start location (ArduPilot Tools/autotest/locations.txt), used with --calm.
 _CALM_START = "-118.393867,33.810313"
 
 

@@ -4,7 +4,7 @@ The only module of the simulator that imports pymavlink. A ``Simulator`` binds o
 socket, learns its peers from the datagrams it receives and sends everything to every peer
 heard in the last ``peer_timeout_s`` wall seconds (as ArduPilot routes). It speaks as
 system 1, component 1, a SUBMARINE with ArduPilot custom modes, and streams telemetry at
-ArduSub's default rates (research/ardusub-sitl-facts.md), changeable with
+ArduSub's default rates (as observed on ArduSub SITL), changeable with
 MAV_CMD_SET_MESSAGE_INTERVAL. Every time field (``time_boot_ms``) is *simulated* time.
 
 The main loop steps the physics every ``dt_s`` of simulated time (telemetry can therefore
