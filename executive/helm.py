@@ -6,18 +6,13 @@ returns the next helm state, the commands to send and the events to log. The
 loop (``executive.loop``) does all sockets, clocks and files around it, so the
 same function runs live, in tests without sockets, and in replay.
 
-Action mapping (ArduSub semantics, research/executive-anchors.md section 2.3):
-
-| action | mode | target |
-|---|---|---|
-| FORWARD | GUIDED | velocity along ``bearing_k(j)`` at cruise speed + yaw, re-sent every ``refresh_s`` (ArduSub drops velocity targets after 3 s) |
-| FORWARD_LEFT/RIGHT | GUIDED | as FORWARD, along the course a third of the way to ``bearing_{k+1}`` / ``bearing_{k-1}`` (physical plans) |
-| ROTATE_LEFT/RIGHT | GUIDED | zero velocity + yaw to ``bearing_{k+-1}(j)``; held until the heading bin is reached |
-| DRIFT | ALT_HOLD | depth of the current layer (no horizontal thrust: the current carries the vehicle) |
-| UP / DOWN | ALT_HOLD | depth of the neighbouring layer; held until that depth is reached |
-
-GUIDED with zero velocity is station keeping on ArduSub, not drifting; that is
-why DRIFT and the glides (which drift along ``w``, spec section 5) use ALT_HOLD.
+Table actions are realised through ``planner.contract.steering`` (the mapping table is in its
+docstring, shared with the evaluation's pilot): a VELOCITY steering is a through-water velocity
+and yaw in GUIDED with zero vertical velocity, re-sent every ``refresh_s`` because ArduSub drops
+a velocity target after 3 s; ROTATE is zero velocity and the yaw in GUIDED; DEPTH (DRIFT, UP,
+DOWN) is a depth target in ALT_HOLD. On ArduSub GUIDED with zero velocity is station keeping, not
+drifting; that is why DRIFT and the glides (which drift along ``w``, spec section 5) use ALT_HOLD.
+Turns and glides are held until ``is_complete``, or until their ``timeout_s`` passes.
 """
 
 from __future__ import annotations
@@ -42,14 +37,14 @@ from executive.state import (
     VelocityYaw,
 )
 from executive.geofence import inside
-from planner.contract.actions import FORWARD_ACTIONS, Action
+from planner.contract.actions import Action
 from planner.contract.settings import BreachAction, OnArrival
+from planner.contract.steering import DEPTH_TOLERANCE_M, Steering, SteeringKind, is_complete, steer
 from planner.contract.table import CELL_MARGIN, PolicyTable
 
 # The mode for each on_breach action (ArduSub: SURFACE ascends, ALT_HOLD holds depth without
 # horizontal thrust, GUIDED holds a position).
 BREACH_MODE: dict[str, SubMode] = {"surface": SubMode.SURFACE, "drift": SubMode.ALT_HOLD, "hold": SubMode.GUIDED}
-_HEADING_TOLERANCE_DEG = 3.0  # a rotation is complete within this of its target bearing
 # Phases in which an autopilot HEARTBEAT runs the helm too: set-up needs no position message
 # to go on. Once the policy is followed, position and attitude alone drive decisions.
 HEARTBEAT_PHASES = frozenset({Phase.WAIT_LINK, Phase.SETUP, Phase.LINK_LOST})
@@ -79,7 +74,7 @@ class HelmConfig:
     refresh_s: float = 1.0  # re-send the active target (velocity targets expire after 3 s)
     retry_s: float = 2.0  # mode and arming requests
     link_loss_timeout_s: float = 30.0
-    depth_tolerance_m: float = 0.5
+    depth_tolerance_m: float = DEPTH_TOLERANCE_M
     # A cell is left only once the vehicle is this fraction of a cell beyond its edge, so that
     # noise and the current cannot make the decision chatter on a boundary.
     cell_margin: float = CELL_MARGIN
@@ -116,14 +111,20 @@ class Activity:
     mode: SubMode
     target: Command | None  # streamed while this activity lasts
     started_s: float
-    completes: bool = False  # ROTATE/UP/DOWN: held until done, not only until the state changes
-    goal_k: int | None = None
-    goal_depth_m: float | None = None
-    timeout_s: float | None = None
+    steering: Steering | None = None  # the table action's, when following it
 
     @property
     def key(self) -> tuple[object, ...]:
         return (self.situation, self.action, self.cell)
+
+    @property
+    def completes(self) -> bool:
+        """ROTATE/UP/DOWN: held until done, not only until the state changes."""
+        return self.steering is not None and self.steering.held
+
+    @property
+    def timeout_s(self) -> float | None:
+        return self.steering.timeout_s if self.steering is not None else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -340,7 +341,8 @@ def _choose(
     held = current.cell[1:3] if current is not None and current.cell is not None else None
     look = table.lookup_held(lat, lon, depth, heading, held, config.cell_margin)  # type: ignore[arg-type]
     if current is not None and current.completes and look.reason in ("ok", "unreachable"):
-        if not _complete(current, vehicle, config.depth_tolerance_m):
+        assert current.steering is not None
+        if not is_complete(current.steering, heading_deg=vehicle.heading_deg, depth_m=depth):
             if current.timeout_s is None or now_s - current.started_s <= current.timeout_s:
                 return helm, False
             out.events.append(Event("warning", f"{current.action.name if current.action else '?'} not complete after "
@@ -376,43 +378,19 @@ def _switch(helm: HelmState, current: Activity | None, new: Activity, out: _Out,
 
 
 def _action_activity(action: Action, state: tuple[int, int, int, int], table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:
-    l, j, _i, k = state
-    base = dict(situation=Situation.FOLLOWING, action=action, cell=state, started_s=now_s)
-    if action in FORWARD_ACTIONS:
-        # spec section 2: steer along bearing_k(j) of this cell; FORWARD_LEFT/RIGHT (physical plans) a
-        # third of the way to the neighbouring heading's bearing (docs/physical-model.md, "Courses")
-        yaw = table.course_deg(j, k, action)
-        rad = math.radians(yaw)
-        speed = config.cruise_speed_m_s
-        target = VelocityYaw(speed * math.cos(rad), speed * math.sin(rad), 0.0, yaw)
-        return Activity(mode=SubMode.GUIDED, target=target, **base)  # type: ignore[arg-type]
-    if action in (Action.ROTATE_LEFT, Action.ROTATE_RIGHT):
-        goal_k = (k + 1) % 8 if action == Action.ROTATE_LEFT else (k - 1) % 8  # spec section 5
-        yaw = table.bearing_deg(j, goal_k)
-        timeout = 3.0 * 90.0 / config.yaw_rate_deg_s + 10.0
-        return Activity(mode=SubMode.GUIDED, target=VelocityYaw(0.0, 0.0, 0.0, yaw), completes=True, goal_k=goal_k,
-                        timeout_s=timeout, **base)  # type: ignore[arg-type]
-    if action in (Action.UP, Action.DOWN):
-        goal_l = l - 1 if action == Action.UP else l + 1
-        goal_depth = table.depth_m[goal_l]
-        timeout = 3.0 * abs(goal_depth - table.depth_m[l]) / config.glide_rate_m_s + 30.0
-        return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(goal_depth), completes=True, goal_depth_m=goal_depth,
-                        timeout_s=timeout, **base)  # type: ignore[arg-type]
-    # DRIFT: hold the layer's depth, no thrust.
-    return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(table.depth_m[l]), **base)  # type: ignore[arg-type]
-
-
-def _complete(act: Activity, vehicle: VehicleState, depth_tolerance_m: float) -> bool:
-    if act.goal_k is not None:
-        # Done on the new bearing itself, not on entering its 45-degree bin: a vehicle left on
-        # a bin edge would flip between headings with every wobble.
-        if vehicle.heading_deg is None or not isinstance(act.target, VelocityYaw):
-            return False
-        error = (vehicle.heading_deg - act.target.yaw_deg + 180.0) % 360.0 - 180.0
-        return abs(error) <= _HEADING_TOLERANCE_DEG
-    if act.goal_depth_m is not None and vehicle.depth_m is not None:
-        return abs(vehicle.depth_m - act.goal_depth_m) <= depth_tolerance_m
-    return True
+    steering = steer(action, state, table, cruise_speed_m_s=config.cruise_speed_m_s,
+                     yaw_rate_deg_s=config.yaw_rate_deg_s, glide_rate_m_s=config.glide_rate_m_s,
+                     depth_tolerance_m=config.depth_tolerance_m)
+    base = dict(situation=Situation.FOLLOWING, action=action, cell=state, started_s=now_s, steering=steering)
+    if steering.kind is SteeringKind.DEPTH:
+        # ALT_HOLD: no horizontal thrust, the current carries the vehicle while the depth is held or sought.
+        assert steering.depth_m is not None
+        return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(steering.depth_m), **base)  # type: ignore[arg-type]
+    # GUIDED, zero vertical velocity (the depth it is at is held): VELOCITY along the course, ROTATE with
+    # zero velocity, which ArduSub flies as station keeping while it turns to the yaw.
+    assert steering.yaw_deg is not None
+    north, east = steering.velocity_ne_m_s
+    return Activity(mode=SubMode.GUIDED, target=VelocityYaw(north, east, 0.0, steering.yaw_deg), **base)  # type: ignore[arg-type]
 
 
 def _arrival(state: tuple[int, int, int, int] | None, vehicle: VehicleState, table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:

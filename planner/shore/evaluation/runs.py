@@ -5,12 +5,11 @@ physics, without the UDP and MAVLink around it) through ``vehicle_sim.world`` cu
 truth file, from the same start states for every method:
 
 - ``paper``, ``physical-robust``, ``physical-expected``: feedback plans, the table looked up at
-  every step as the executive does (``executive.helm``'s action mapping: FORWARD a through-water
-  velocity at cruise speed along the cell's bearing; DRIFT no thrust at the layer's depth;
-  UP/DOWN no thrust while the depth target is reached; ROTATE turns while holding position,
-  as ArduSub's GUIDED mode does with a zero velocity target), ROTATE and UP/DOWN held until done,
-  a cell left only 10 % of a spacing past its edge, drifting at the layer's depth where the plan
-  has no action (surfacing over a cell it counts as land) until it has one again;
+  every step as the executive does, each action flown through ``planner.contract.steering``
+  as ``executive.helm`` flies it (that module's docstring has the mapping table and says where
+  the helm and this pilot realise it differently), ROTATE and UP/DOWN held until done, a cell
+  left only 10 % of a spacing past its edge, drifting at the layer's depth where the plan has
+  no action (surfacing over a cell it counts as land) until it has one again;
 - ``open-loop``: the physical expected plan's nominal action sequence from the start (each
   action for its mean predicted duration), replayed without looking at the position;
 - ``naive``: point at the goal and drive at cruise speed, gliding to the goal's depth.
@@ -31,7 +30,8 @@ from typing import TYPE_CHECKING, Literal, Protocol, get_args
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.contract.actions import FORWARD_ACTIONS, Action
+from planner.contract.actions import Action
+from planner.contract.steering import SteeringKind, is_complete, steer
 from planner.contract.table import CELL_MARGIN, PolicyTable
 from vehicle_sim.dynamics import Body, Setpoint, SetpointKind, step
 from planner.contract.geodesy import M_PER_DEG_LAT
@@ -44,8 +44,6 @@ Method = Literal["paper", "physical-robust", "physical-expected", "open-loop", "
 METHODS: tuple[str, ...] = get_args(Method)
 Outcome = Literal["arrived", "stranded", "left_region", "timed_out", "gave_up", "refused"]
 OUTCOMES: tuple[str, ...] = get_args(Outcome)
-_HEADING_TOLERANCE_DEG = 3.0  # executive.helm: a rotation is complete within this of its bearing
-_DEPTH_TOLERANCE_M = 0.5  # executive.helm.HelmConfig.depth_tolerance_m
 
 
 class Truth(Protocol):
@@ -148,25 +146,24 @@ class FeedbackPilot:
 
 def realise(action: Action, state: tuple[int, int, int, int], table: PolicyTable, body: Body,
             params: VehicleParams) -> tuple[Setpoint, Callable[[Body], bool] | None]:
-    """The setpoint for an action in a state, and for ROTATE/UP/DOWN the test that it is done."""
-    l, j, _i, k = state
-    if action in FORWARD_ACTIONS:
-        yaw = table.course_deg(j, k, action)
-        rad = math.radians(yaw)
-        speed = params.cruise_speed_m_s
-        return Setpoint(kind=SetpointKind.VELOCITY, north_m_s=speed * math.cos(rad), east_m_s=speed * math.sin(rad),
-                        yaw_deg=yaw, depth_m=table.depth_m[l]), None
-    if action in (Action.ROTATE_LEFT, Action.ROTATE_RIGHT):
-        goal_k = (k + 1) % 8 if action == Action.ROTATE_LEFT else (k - 1) % 8  # spec section 5
-        yaw = table.bearing_deg(j, goal_k)
-        sp = Setpoint(kind=SetpointKind.POSITION, lat_deg=body.lat_deg, lon_deg=body.lon_deg, depth_m=body.depth_m,
-                      yaw_deg=yaw)
-        return sp, lambda b: abs((b.heading_deg - yaw + 180.0) % 360.0 - 180.0) <= _HEADING_TOLERANCE_DEG
-    if action in (Action.UP, Action.DOWN):
-        goal_depth = table.depth_m[l - 1 if action == Action.UP else l + 1]
-        return (Setpoint(kind=SetpointKind.DEPTH, depth_m=goal_depth),
-                lambda b: abs(b.depth_m - goal_depth) <= _DEPTH_TOLERANCE_M)
-    return Setpoint(kind=SetpointKind.DEPTH, depth_m=table.depth_m[l]), None  # DRIFT
+    """The setpoint for an action in a state, and for ROTATE/UP/DOWN the test that it is done.
+
+    ``planner.contract.steering`` decides; here it becomes a simulator setpoint. A held manoeuvre
+    has no timeout here: it lasts until done, or until the run's own time limit.
+    """
+    steering = steer(action, state, table, cruise_speed_m_s=params.cruise_speed_m_s,
+                     yaw_rate_deg_s=params.yaw_rate_deg_s, glide_rate_m_s=params.glide_rate_m_s)
+    done = (lambda b: is_complete(steering, heading_deg=b.heading_deg, depth_m=b.depth_m)) if steering.held else None
+    if steering.kind is SteeringKind.VELOCITY:
+        north, east = steering.velocity_ne_m_s
+        return Setpoint(kind=SetpointKind.VELOCITY, north_m_s=north, east_m_s=east, yaw_deg=steering.yaw_deg,
+                        depth_m=steering.depth_m), done
+    if steering.kind is SteeringKind.ROTATE:
+        # Hold the position and depth where the turn began: what ArduSub's GUIDED mode does with the
+        # helm's zero velocity target.
+        return Setpoint(kind=SetpointKind.POSITION, lat_deg=body.lat_deg, lon_deg=body.lon_deg, depth_m=body.depth_m,
+                        yaw_deg=steering.yaw_deg), done
+    return Setpoint(kind=SetpointKind.DEPTH, depth_m=steering.depth_m), done  # DRIFT, UP, DOWN
 
 
 class OpenLoopPilot:
