@@ -16,7 +16,7 @@ DEMO_SPEEDUP ?= 1000
 # Start states of the closed-loop comparison at the end of `make demo` (docs/evaluation.md uses 200).
 EVAL_STARTS ?= 40
 
-.PHONY: demo test node bench clean sysdeps
+.PHONY: demo test typecheck node bench clean sysdeps
 
 # System packages: a Python >= 3.11 with venv and pip (Debian: python3-venv).
 sysdeps:
@@ -61,7 +61,11 @@ node:
 	@echo "node or npm not on PATH: not installing @mcap/core; tests/test_mcap_node.py will skip"
 endif
 
-test: $(STAMP) node
+# The type check is part of the tests: mypy and the stubs come with the test extra; settings in pyproject.toml.
+typecheck: $(STAMP)
+	$(PY) -m mypy
+
+test: $(STAMP) node typecheck
 	$(PY) -m pytest
 
 bench: $(STAMP)
@@ -69,4 +73,4 @@ bench: $(STAMP)
 	$(PY) bench/bench_exec.py
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache .mypy_cache

@@ -13,13 +13,20 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from executive.helm import HelmConfig
+from planner.contract.arguments import Subcommands
 from planner.contract.errors import ExecutiveError
 from planner.contract.table import PolicyTable, read_table_file
 
+if TYPE_CHECKING:  # at run time imported where used, as below
+    from executive.goal_tables import MissionPlan
+    from planner.contract.mission import Mission
+    from planner.contract.settings import OnArrival
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+
+def add_parsers(sub: Subcommands) -> None:
     ex = sub.add_parser("exec", help="run the onboard executive against a vehicle over MAVLink")
     ex.add_argument("--table", type=Path, action="append",
                     help="policy table (.lrpt) from `lrauv plan`; repeat for the goals of a multi-goal mission")
@@ -220,13 +227,13 @@ def _resume_log(previous: Path | None, given: Path | None) -> tuple[Path, str | 
     return path, note
 
 
-def _load_mission(mission_path: Path):  # type: ignore[no-untyped-def]
+def _load_mission(mission_path: Path) -> Mission:
     from planner.contract.mission import load_mission
 
     return load_mission(mission_path)
 
 
-def _helm_figures(m) -> HelmConfig:  # type: ignore[no-untyped-def]
+def _helm_figures(m: Mission) -> HelmConfig:
     """The helm's vehicle figures and safety limits from a mission."""
     v, s = m.vehicle, m.safety
     return HelmConfig(
@@ -236,14 +243,15 @@ def _helm_figures(m) -> HelmConfig:  # type: ignore[no-untyped-def]
     )
 
 
-def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTable], on_arrival: str | None):  # type: ignore[no-untyped-def]
+def _mission_setup(mission_path: Path, paths: list[Path], tables: list[PolicyTable],
+                   on_arrival: OnArrival | None) -> tuple[HelmConfig, MissionPlan, Mission]:
     """The helm's figures and the goal list from the mission; each table must serve one of its goals."""
     from executive import goal_tables
 
     m = _load_mission(mission_path)
     goals = m.goals
     if on_arrival:  # the mission's end; goals before it keep theirs (``next``)
-        goals = (*goals[:-1], replace(goals[-1], on_arrival=on_arrival))  # type: ignore[arg-type]
+        goals = (*goals[:-1], replace(goals[-1], on_arrival=on_arrival))
     plan = goal_tables.assign(goals, zip(map(str, paths), tables), str(mission_path))
     if plan.table is None:
         first = goals[0].goal

@@ -33,7 +33,7 @@ from executive.mission_protocol import addressed_to
 from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
 from executive.replanner import ForecastWatcher, PlanJob, PlanResult, Replanner
-from executive.state import Command, Event, Phase, VehicleState
+from executive.state import Command, Event, LogLevelName, Phase, VehicleState
 from executive.uploads import Uploads
 from planner.contract.errors import LrauvError
 from planner.contract.table import PolicyTable
@@ -339,10 +339,10 @@ class Executive:
         if kind == "SYSTEM_TIME":
             self._unix_offset_s = bridge.unix_offset_s(msg) or self._unix_offset_s
         if kind in ("COMMAND_ACK", "STATUSTEXT"):
-            level = "info" if kind == "STATUSTEXT" and msg.severity > 4 else "warning"
+            level: LogLevelName = "info" if kind == "STATUSTEXT" and msg.severity > 4 else "warning"
             if kind == "COMMAND_ACK" and msg.result == 0:
                 level = "info"
-            self._event(now_s, Event(level, bridge.command_text(msg)))  # type: ignore[arg-type]
+            self._event(now_s, Event(level, bridge.command_text(msg)))
         if kind == "GLOBAL_POSITION_INT":
             self._log(self._record_state, now_s, self.vehicle)
         if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
@@ -555,7 +555,7 @@ class Executive:
         self._log(self._record_command, now_s, cmd)
 
     def _record_command(self, now_s: float, cmd: Command) -> None:
-        fields = {name: getattr(cmd, name) for name in cmd.__slots__}  # type: ignore[union-attr]
+        fields = {name: getattr(cmd, name) for name in cmd.__slots__}
         self.recorder.write(Topic.COMMAND, now_s, {"time_s": now_s, "kind": type(cmd).__name__, **fields})
 
     def _send(self, now_s: float, msg: Any) -> None:
@@ -579,8 +579,9 @@ class Executive:
                 self._send_on(self.gcs_mav, now_s, bridge.statustext(self.gcs_mav, event))
 
     def _record_state(self, now_s: float, v: VehicleState) -> None:
-        if v.has_position:
-            self.recorder.location_fix(now_s, lat_deg=v.lat_deg, lon_deg=v.lon_deg, depth_m=v.depth_m)  # type: ignore[arg-type]
+        lat, lon, depth = v.lat_deg, v.lon_deg, v.depth_m
+        if lat is not None and lon is not None and depth is not None:  # VehicleState.has_position, narrowed
+            self.recorder.location_fix(now_s, lat_deg=lat, lon_deg=lon, depth_m=depth)
         self.recorder.write(Topic.STATE, now_s, {name: getattr(v, name) for name in _STATE_FIELDS})
 
     def _record_policy(self, table: PolicyTable, table_bytes: bytes | None, reason: str, *, now_s: float = 0.0,

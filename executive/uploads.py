@@ -24,7 +24,7 @@ class Uploads:
     MESSAGES = mp.RECEIVER_MESSAGES | {"FILE_TRANSFER_PROTOCOL"}
 
     def __init__(self, *, accept_goals: Callable[[tuple[Any, ...]], str | None],
-                 accept_file: Callable[[str, bytes], str | None], refused: Callable[[str, str], None]) -> None:
+                 accept_file: Callable[[str, bytes], str | None], refused: Callable[[str, str], object]) -> None:
         self._accept_goals = accept_goals
         self._refused = refused
         self.ftp = FtpServer(accept=accept_file)

@@ -9,7 +9,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
@@ -332,19 +332,32 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
                       model=model, solution=solution, table=table, timings_s=timings)
 
 
+class ValueArrays(TypedDict):
+    """The arrays of an exported ``.npz`` by name (spec section 8)."""
+
+    cost: NDArray[np.float64]
+    steps: NDArray[np.int64]
+    action: NDArray[np.uint8]
+    lon: NDArray[np.float64]
+    lat: NDArray[np.float64]
+    depth: NDArray[np.float64]
+    flow_dir: NDArray[np.int8]
+    time_s: NotRequired[NDArray[np.float64]]  # physical plans only
+
+
 def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:
     """Write the arrays of spec section 8 to an ``.npz``, atomically."""
     sol = result.solution
     buf = io.BytesIO()
-    arrays = dict(
-        cost=np.ascontiguousarray(sol.cost),
-        steps=np.ascontiguousarray(sol.steps).astype(np.int64),
-        action=np.ascontiguousarray(sol.action).astype(np.uint8),
-        lon=result.grid.lon_deg,
-        lat=result.grid.lat_deg,
-        depth=result.grid.depth_m,
-        flow_dir=np.asarray(result.model.flow_dir, dtype=np.int8),
-    )
+    arrays: ValueArrays = {
+        "cost": np.ascontiguousarray(sol.cost),
+        "steps": np.ascontiguousarray(sol.steps).astype(np.int64),
+        "action": np.ascontiguousarray(sol.action).astype(np.uint8),
+        "lon": result.grid.lon_deg,
+        "lat": result.grid.lat_deg,
+        "depth": result.grid.depth_m,
+        "flow_dir": np.asarray(result.model.flow_dir, dtype=np.int8),
+    }
     if isinstance(sol, PhysicalSolution):  # cost in Wh and the time to go, s (docs/physical-model.md)
         arrays["time_s"] = np.ascontiguousarray(sol.time_s)
     np.savez_compressed(buf, **arrays)

@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from enum import Enum, IntEnum, unique
+from typing import TypedDict
 
 from planner.contract.modes import SubMode  # ArduSub's mode numbers, shared with the executive
 from vehicle_sim.dynamics import IDLE, Body, Setpoint, SetpointKind, TurnDirection
@@ -175,6 +176,14 @@ class SendOnce:
 Output = Ack | Text | Interval | SendOnce
 
 
+class YawFields(TypedDict):
+    """The yaw part of a GUIDED ``Setpoint``: what a target's yaw and yaw-rate fields set, or keep."""
+
+    yaw_deg: float | None
+    yaw_rate_deg_s: float | None
+    turn: TurnDirection
+
+
 class Autopilot:
     """Mode, arming, the active setpoint and failsafe state of the simulated ArduSub."""
 
@@ -321,8 +330,8 @@ class Autopilot:
             return
         pos = not type_mask & _POS_BITS
         vel = not type_mask & _VEL_BITS
-        keep = {"yaw_deg": self._guided.yaw_deg, "yaw_rate_deg_s": self._guided.yaw_rate_deg_s,
-                "turn": self._guided.turn}
+        keep: YawFields = {"yaw_deg": self._guided.yaw_deg, "yaw_rate_deg_s": self._guided.yaw_rate_deg_s,
+                           "turn": self._guided.turn}
         if pos:  # position, or position + velocity (taken as position)
             self._set_guided(Setpoint(kind=SetpointKind.POSITION, lat_deg=lat_int / 1e7, lon_deg=lon_int / 1e7,
                                       depth_m=depth, **keep), None)
@@ -397,7 +406,7 @@ class Autopilot:
         return Result.ACCEPTED
 
     def _guided_yaw(self, type_mask: int, yaw_rad: float, yaw_rate_rad_s: float, body: Body,
-                    *, relative: bool) -> dict[str, object]:
+                    *, relative: bool) -> YawFields:
         """Yaw fields of a LOCAL_NED target; when both yaw bits say ignore, the previous yaw target stays."""
         if not type_mask & _YAW_BIT and math.isfinite(yaw_rad):
             deg = math.degrees(yaw_rad) + (body.heading_deg if relative else 0.0)

@@ -19,11 +19,16 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from planner.contract.arguments import CommandParser
+from planner.contract.arguments import CommandParser, Subcommands
 from planner.contract.errors import LrauvError, SimulatorError
+
+if TYPE_CHECKING:  # at run time imported where used, as below: registering the parser loads neither
+    from vehicle_sim.endpoint import SimConfig
+    from vehicle_sim.world import Truth
 
 EXIT_BAD_INPUT = 2
 READY_PREFIX = "lrauv sim: listening on udp "
@@ -36,7 +41,7 @@ class SimError(SimulatorError):
     """Bad simulator input; the message names the flag, the value and what was expected."""
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:  # type: ignore[type-arg]
+def add_parser(subparsers: Subcommands) -> argparse.ArgumentParser:
     """Register the ``sim`` subcommand (for ``lrauv``)."""
     p = subparsers.add_parser("sim", help="run the simulated ArduSub-like vehicle (MAVLink 2 over UDP)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -132,7 +137,7 @@ def wait_ready(sim: subprocess.Popen[str], *, timeout_s: float = 60.0) -> int:
 # -- parsing ----------------------------------------------------------------------------------
 
 
-def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None]:
     """(World or TruthSequence, SimConfig, duration_s or None) from the flags."""
     from vehicle_sim.autopilot import AutopilotSettings, FailsafeAction
     from vehicle_sim.endpoint import SimConfig
@@ -152,6 +157,7 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     if args.failsafe not in FAILSAFE_CHOICES:
         raise SimError(f"--failsafe {args.failsafe!r}: expected one of {', '.join(FAILSAFE_CHOICES)}")
 
+    world: Truth
     if args.calm:
         if args.forecast is not None:
             raise SimError("--calm and --forecast: expected one of them, not both")
@@ -184,7 +190,7 @@ def _configure(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return world, config, duration
 
 
-def _number(text: str, flag: str, expected: str, ok) -> float:  # type: ignore[no-untyped-def]
+def _number(text: str, flag: str, expected: str, ok: Callable[[float], bool]) -> float:
     try:
         value = float(text)
     except (TypeError, ValueError):
@@ -223,7 +229,7 @@ def _lon_lat(text: str) -> tuple[float, float]:
     return lon, lat
 
 
-def _start_offset(text: str | None, world) -> float:  # type: ignore[no-untyped-def]
+def _start_offset(text: str | None, world: Truth) -> float:
     """Seconds from the forecast's first time to ``--start-time`` (0 without the flag)."""
     if text is None:
         return 0.0
@@ -244,7 +250,7 @@ def _start_offset(text: str | None, world) -> float:  # type: ignore[no-untyped-
     return offset
 
 
-def _check_start(world, lon: float, lat: float, depth_m: float, offset_s: float, text: str) -> None:  # type: ignore[no-untyped-def]
+def _check_start(world: Truth, lon: float, lat: float, depth_m: float, offset_s: float, text: str) -> None:
     box = world.bbox
     if not (box.west_deg <= lon <= box.east_deg and box.south_deg <= lat <= box.north_deg):
         raise SimError(f"--start {text}: outside the forecast (lon {box.west_deg:.4f}..{box.east_deg:.4f}, "
@@ -256,7 +262,7 @@ def _check_start(world, lon: float, lat: float, depth_m: float, offset_s: float,
                        "expected a water point")
 
 
-def _install_stop_handlers(stop: threading.Event):  # type: ignore[no-untyped-def]
+def _install_stop_handlers(stop: threading.Event) -> Callable[[], None]:
     """SIGTERM and SIGINT set ``stop`` (clean exit, track flushed); returns a function restoring the old ones."""
     if threading.current_thread() is not threading.main_thread():
         return lambda: None

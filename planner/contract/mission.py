@@ -12,22 +12,26 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, get_args
+from typing import Any
 
 import yaml
 
 from planner.contract.errors import LrauvError, MissionError
 from planner.contract.geodesy import BBox
 from planner.contract.settings import (
+    BREACH_ACTION_OPTIONS,
     CRITERIA,
+    MODEL_OPTIONS,
+    ON_ARRIVAL_OPTIONS,
+    UNCERTAINTY_OPTIONS,
     BreachAction,
+    ChoiceT,
     Costs,
     Goal,
-    Model,
     OnArrival,
     PhysicalSettings,
     PlanSettings,
-    Uncertainty,
+    check_choice,
 )
 from planner.contract.waypoints import (
     GOAL_FRAMES,
@@ -188,9 +192,9 @@ class _Doc:
                                f" in YAML ({exc.reason})") from None
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
-            line = f":{mark.line + 1}" if mark is not None else ""
+            at_line = f":{mark.line + 1}" if mark is not None else ""
             problem = " ".join((getattr(exc, "problem", None) or str(exc)).split())
-            raise MissionError(f"{path}{line}: not valid YAML: {problem}") from None
+            raise MissionError(f"{path}{at_line}: not valid YAML: {problem}") from None
         if node is None:
             raise MissionError(f"{path}: the file is empty; expected a mission mapping")
         self.root = self._build(node, "")
@@ -225,7 +229,7 @@ class _Doc:
         return MissionError(f"{where} {key}: {message}" if key else f"{where}: {message}")
 
 
-def _scalar(node: yaml.ScalarNode) -> Any:
+def _scalar(node: yaml.Node) -> Any:
     loader = yaml.SafeLoader("")
     return loader.construct_object(node, deep=True)
 
@@ -288,12 +292,12 @@ class _Section:
             raise self.doc.error(self.path(name), f"expected non-empty text; got {v!r}")
         return v
 
-    def choice(self, name: str, options: Any, default: str) -> str:
+    def choice(self, name: str, options: tuple[ChoiceT, ...], default: ChoiceT) -> ChoiceT:
         v = self.text(name, default)
-        allowed = get_args(options)
-        if v not in allowed:
-            raise self.doc.error(self.path(name), f"expected one of {', '.join(allowed)}; got {v!r}")
-        return v
+        for option in options:
+            if option == v:
+                return option
+        raise self.doc.error(self.path(name), f"expected one of {', '.join(options)}; got {v!r}")
 
     def boolean(self, name: str, default: bool) -> bool:
         v = self.value.get(name, default)
@@ -343,7 +347,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         synthetic_hours=hours,
         time_index=fc.integer("time_index", minimum=0) if fc.has("time_index") else None,
         time_iso=str(fc.raw("time")) if fc.has("time") else None,
-        variables=tuple(variables) if variables else None,  # type: ignore[arg-type]
+        variables=tuple(variables) if variables else None,
         grid_file=(base / fc.text("grid_file")) if fc.has("grid_file") else None,
     )
 
@@ -382,13 +386,14 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     )
 
     pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical"})
-    model = pl.choice("model", Model, "paper")
-    criterion = pl.text("criterion", "robust")
-    if criterion not in CRITERIA[model]:
+    model = pl.choice("model", MODEL_OPTIONS, "paper")
+    criterion_text = pl.text("criterion", "robust")
+    if criterion_text not in CRITERIA[model]:
         has = CRITERIA[model]
-        known = criterion in {c for cs in CRITERIA.values() for c in cs}
-        raise doc.error("planning.criterion", f"the {model} model has {' and '.join(has)}; got {criterion!r}" if known
-                        else f"expected one of {', '.join(has)} (the {model} model's); got {criterion!r}")
+        known = criterion_text in {c for cs in CRITERIA.values() for c in cs}
+        raise doc.error("planning.criterion", f"the {model} model has {' and '.join(has)}; got {criterion_text!r}"
+                        if known else f"expected one of {', '.join(has)} (the {model} model's); got {criterion_text!r}")
+    criterion = check_choice("planning.criterion", criterion_text, CRITERIA[model])
     cs = pl.section("costs", {"drift", "forward", "rotate", "glide"})
     d_costs = Costs()
     try:
@@ -397,9 +402,9 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         key = str(exc).split(":", 1)[0]
         raise doc.error(f"planning.{key}", str(exc).split(": ", 1)[-1]) from None
     settings = PlanSettings(
-        model=model,  # type: ignore[arg-type]
-        criterion=criterion,  # type: ignore[arg-type]
-        uncertainty=pl.choice("uncertainty", Uncertainty, "lateral"),  # type: ignore[arg-type]
+        model=model,
+        criterion=criterion,
+        uncertainty=pl.choice("uncertainty", UNCERTAINTY_OPTIONS, "lateral"),
         costs=costs,
         calm_speed_m_s=pl.number("calm_speed_m_s", 0.01, minimum=0, unit="m/s"),
         physical=_physical(doc, pl),
@@ -425,7 +430,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         goals.append(
             MissionGoal(
                 goal=Goal(lon_deg=lon, lat_deg=lat, depth_m=depth, radius_cells=g.integer("radius_cells", 1, minimum=0)),
-                on_arrival=g.choice("on_arrival", OnArrival, "hold"),  # type: ignore[arg-type]
+                on_arrival=g.choice("on_arrival", ON_ARRIVAL_OPTIONS, "hold"),
             )
         )
 
@@ -451,7 +456,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         max_depth_m=sf.number("max_depth_m", 50.0, minimum=0, unit="m"),
         geofence=fence,
         link_loss_timeout_s=sf.number("link_loss_timeout_s", 30.0, minimum=0.1, unit="s"),
-        on_breach=sf.choice("on_breach", BreachAction, "surface"),  # type: ignore[arg-type]
+        on_breach=sf.choice("on_breach", BREACH_ACTION_OPTIONS, "surface"),
     )
     if safety.max_depth_m < deepest:
         raise doc.error("safety.max_depth_m", f"{safety.max_depth_m:g} m is shallower than the deepest layer {deepest:g} m")
@@ -538,7 +543,7 @@ def items_to_goals(items: Sequence[MissionItem]) -> tuple[MissionGoal, ...]:
     for item in items[1:]:
         lat, lon, depth, radius, code = _goal_fields(item)
         goals.append(MissionGoal(goal=Goal(lon_deg=lon, lat_deg=lat, depth_m=depth, radius_cells=radius),
-                                 on_arrival=code.on_arrival))  # type: ignore[arg-type]
+                                 on_arrival=check_choice("on_arrival", code.on_arrival, ON_ARRIVAL_OPTIONS)))
     return tuple(goals)
 
 

@@ -4,29 +4,37 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal, get_args
+from typing import Literal, TypeVar, get_args
 
-from planner.contract.actions import Action
+from planner.contract.actions import MOVE_ACTIONS, Action
 from planner.contract.errors import GoalError, ContractError
 from planner.contract.vehicle import VehicleParams
 
 Criterion = Literal["robust", "optimistic", "expected"]
 Uncertainty = Literal["lateral", "none"]
 Model = Literal["paper", "physical"]
-# Which criteria each model has (docs/physical-model.md): the paper's graph has no probabilities.
-CRITERIA: dict[str, tuple[str, ...]] = {"paper": ("robust", "optimistic"), "physical": ("robust", "expected")}
 OnArrival = Literal["hold", "surface", "drift", "next"]  # at a goal (docs/missions.md); the executive's too
 BreachAction = Literal["surface", "drift", "hold"]  # when a safety limit is breached (docs/missions.md)
+# Each Literal's options as a typed tuple, so that check_choice returns the Literal, not a bare str.
+CRITERION_OPTIONS: tuple[Criterion, ...] = get_args(Criterion)
+UNCERTAINTY_OPTIONS: tuple[Uncertainty, ...] = get_args(Uncertainty)
+MODEL_OPTIONS: tuple[Model, ...] = get_args(Model)
+ON_ARRIVAL_OPTIONS: tuple[OnArrival, ...] = get_args(OnArrival)
+BREACH_ACTION_OPTIONS: tuple[BreachAction, ...] = get_args(BreachAction)
+# Which criteria each model has (docs/physical-model.md): the paper's graph has no probabilities.
+CRITERIA: dict[str, tuple[Criterion, ...]] = {"paper": ("robust", "optimistic"), "physical": ("robust", "expected")}
 
 DEFAULT_CALM_SPEED_M_S = 0.01  # spec section 3
 
+ChoiceT = TypeVar("ChoiceT", bound=str)
 
-def check_choice(name: str, value: str, choices: object) -> str:
-    """Return ``value`` if it is one of the Literal's options, else raise naming the key."""
-    options = get_args(choices)
-    if value not in options:
-        raise ContractError(f"{name}: expected one of {', '.join(options)}; got {value!r}")
-    return value
+
+def check_choice(name: str, value: str, options: tuple[ChoiceT, ...]) -> ChoiceT:
+    """``value`` as the one of ``options`` it equals (typed as their Literal), else raise naming the key."""
+    for option in options:
+        if option == value:
+            return option
+    raise ContractError(f"{name}: expected one of {', '.join(options)}; got {value!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -64,7 +72,7 @@ class Costs:
 
     def as_list(self) -> list[int]:
         """Costs indexed by action code 0..5."""
-        return [self.of(a) for a in range(6)]
+        return [self.of(a) for a in MOVE_ACTIONS]
 
     @property
     def max_cost(self) -> int:
@@ -148,11 +156,11 @@ class PlanSettings:
     vehicle: VehicleParams = field(default_factory=VehicleParams)
 
     def __post_init__(self) -> None:
-        check_choice("model", self.model, Model)
-        check_choice("criterion", self.criterion, Criterion)
+        check_choice("model", self.model, MODEL_OPTIONS)
+        check_choice("criterion", self.criterion, CRITERION_OPTIONS)
         if self.criterion not in CRITERIA[self.model]:
             raise ContractError(f"criterion: the {self.model} model has {' and '.join(CRITERIA[self.model])}; "
                                f"got {self.criterion!r}")
-        check_choice("uncertainty", self.uncertainty, Uncertainty)
+        check_choice("uncertainty", self.uncertainty, UNCERTAINTY_OPTIONS)
         if not (math.isfinite(self.calm_speed_m_s) and self.calm_speed_m_s >= 0):
             raise ContractError(f"calm_speed: expected a non-negative speed in m/s; got {self.calm_speed_m_s!r}")

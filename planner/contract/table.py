@@ -83,6 +83,10 @@ class PolicyTable:
     water: NDArray[np.bool_] = field(repr=False)  # (L, ny, nx)
     # Physical plans: {"vehicle": {...}, "sampling": {...}} (docs/policy-table.md); None for the paper model.
     physical: dict[str, dict[str, float | int | bool | None]] | None = None
+    # Derived from the geometry in __post_init__, for the per-message lookups.
+    _bearings: NDArray[np.float64] = field(init=False, repr=False, compare=False)
+    _bearing_rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
+    _course_rows: list[list[list[float]]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         shape = (len(self.depth_m), self.ny, self.nx)
@@ -151,11 +155,11 @@ class PolicyTable:
     # -- geometry -------------------------------------------------------------------
     @property
     def lon_deg(self) -> NDArray[np.float64]:
-        return self.lon0_deg + self.dlon_deg * np.arange(self.nx)
+        return self.lon0_deg + self.dlon_deg * np.arange(self.nx, dtype=np.float64)
 
     @property
     def lat_deg(self) -> NDArray[np.float64]:
-        return self.lat0_deg + self.dlat_deg * np.arange(self.ny)
+        return self.lat0_deg + self.dlat_deg * np.arange(self.ny, dtype=np.float64)
 
     @property
     def n_layers(self) -> int:
@@ -167,12 +171,12 @@ class PolicyTable:
 
     def bearing_deg(self, j: int, k: int) -> float:
         """True compass bearing of grid direction ``k`` in row ``j`` (spec section 2)."""
-        return float(self._bearings[j, k])  # type: ignore[attr-defined]
+        return float(self._bearings[j, k])
 
     def course_deg(self, j: int, k: int, action: Action) -> float:
         """Compass course of a FORWARD action in heading ``k`` of row ``j``: ``bearing_k(j)`` for FORWARD,
         a third of the way to the neighbouring heading's bearing for FORWARD_LEFT/RIGHT."""
-        return self._course_rows[j][k][FORWARD_ACTIONS.index(action)]  # type: ignore[attr-defined]
+        return self._course_rows[j][k][FORWARD_ACTIONS.index(action)]
 
     def cell_centre(self, j: int, i: int) -> tuple[float, float]:
         """``(lat_deg, lon_deg)`` of a cell centre."""
@@ -208,7 +212,7 @@ class PolicyTable:
         """Grid direction nearest to a compass heading in row ``j``; ties to the lower ``k`` (spec 2)."""
         h = float(heading_deg)
         best_k, best = 0, math.inf
-        for k, b in enumerate(self._bearing_rows[j]):  # type: ignore[attr-defined]
+        for k, b in enumerate(self._bearing_rows[j]):
             diff = abs((h - b + 180.0) % 360.0 - 180.0)
             if diff < best:  # strict: ties keep the lower k
                 best_k, best = k, diff

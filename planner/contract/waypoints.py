@@ -63,7 +63,7 @@ class MavFrame(IntEnum):
 
 GOAL_FRAMES = frozenset({MavFrame.GLOBAL_RELATIVE_ALT, MavFrame.GLOBAL_RELATIVE_ALT_INT})
 # _INT frames (degE7 in MISSION_ITEM_INT) and their float twins (degrees in MISSION_ITEM and WPL files).
-_FLOAT_FRAME = {MavFrame.GLOBAL_INT: MavFrame.GLOBAL, MavFrame.GLOBAL_RELATIVE_ALT_INT: MavFrame.GLOBAL_RELATIVE_ALT,
+_FLOAT_FRAME: dict[int, int] = {MavFrame.GLOBAL_INT: MavFrame.GLOBAL, MavFrame.GLOBAL_RELATIVE_ALT_INT: MavFrame.GLOBAL_RELATIVE_ALT,
                 MavFrame.GLOBAL_TERRAIN_ALT_INT: MavFrame.GLOBAL_TERRAIN_ALT}
 
 
@@ -237,7 +237,7 @@ def from_float32(x: float) -> float:
 
 def wpl_frame(frame: int) -> int:
     """The frame written in a WPL file: the float twin of an _INT frame (6 -> 3), as QGC writes."""
-    return int(_FLOAT_FRAME.get(frame, frame))  # type: ignore[call-overload]  # an IntEnum key matches its int
+    return int(_FLOAT_FRAME.get(frame, frame))
 
 
 def _num(value: float) -> str:
@@ -281,7 +281,7 @@ def parse_wpl(text: str, *, source: str = "<text>") -> tuple[MissionItem, ...]:
         raise WaypointError(f"{source}:1: header missing; expected {WPL_HEADER!r}")
     if lines[0].strip() != WPL_HEADER:
         raise WaypointError(f"{source}:1: header {lines[0].strip()!r} is not supported; expected {WPL_HEADER!r}")
-    items = []
+    items: list[MissionItem] = []
     for lineno, line in enumerate(lines[1:], start=2):
         if not line.strip() or line.lstrip().startswith("#"):
             continue

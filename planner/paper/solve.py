@@ -112,7 +112,8 @@ def nominal_path(solution: Solution, start: tuple[int, int, int, int], *, max_st
     model = solution.model
     out = np.empty(3, dtype=np.int64)
     path: list[PathStep] = []
-    state = tuple(int(x) for x in start)
+    l, j, i, k = start
+    state = (int(l), int(j), int(i), int(k))
     for _ in range(max_steps):
         a = Action(int(solution.action[state]))
         path.append(PathStep(l=state[0], j=state[1], i=state[2], k=state[3], action=a))
@@ -223,7 +224,10 @@ def solve(model: TransitionModel, goal: Goal, *, progress: bool = False) -> Solu
 PARALLEL_FROM_STATES = 2_000_000  # below this, starting threads costs more than it saves
 
 
-def _build_predecessors(flow_dir, reach, lateral, robust, masks, remaining):  # type: ignore[no-untyped-def]
+def _build_predecessors(
+    flow_dir: NDArray[np.int8], reach: NDArray[np.int8], lateral: bool, robust: bool, masks: NDArray[np.uint64],
+    remaining: NDArray[np.uint8],
+) -> None:
     """One forward pass: predecessor masks of every state and, for robust, outcome counts.
 
     ``masks[t, 0]`` (mask_h) bit ``b`` (b < 16: DRIFT, else FORWARD) and ``masks[t, 1]`` (mask_v) bit ``b``
@@ -236,19 +240,28 @@ def _build_predecessors(flow_dir, reach, lateral, robust, masks, remaining):  # 
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _preds_parallel(flow_dir, reach, lateral, robust, masks, remaining):  # pragma: no cover
+def _preds_parallel(  # pragma: no cover
+    flow_dir: NDArray[np.int8], reach: NDArray[np.int8], lateral: bool, robust: bool, masks: NDArray[np.uint64],
+    remaining: NDArray[np.uint8],
+) -> None:
     for k in numba.prange(8):
         _preds_heading(np.int64(k), flow_dir, reach, lateral, robust, masks, remaining)
 
 
 @numba.njit(cache=True, nogil=True)
-def _preds_serial(flow_dir, reach, lateral, robust, masks, remaining):  # pragma: no cover
+def _preds_serial(  # pragma: no cover
+    flow_dir: NDArray[np.int8], reach: NDArray[np.int8], lateral: bool, robust: bool, masks: NDArray[np.uint64],
+    remaining: NDArray[np.uint8],
+) -> None:
     for k in range(8):
         _preds_heading(k, flow_dir, reach, lateral, robust, masks, remaining)
 
 
 @numba.njit(cache=True, nogil=True)
-def _preds_heading(k, flow_dir, reach, lateral, robust, masks, remaining):  # pragma: no cover
+def _preds_heading(  # pragma: no cover
+    k: int | np.int64, flow_dir: NDArray[np.int8], reach: NDArray[np.int8], lateral: bool, robust: bool,
+    masks: NDArray[np.uint64], remaining: NDArray[np.uint8],
+) -> None:
     """The forward pass for the states of one heading (all their outcomes keep it).
 
     The outcome rule of ``transitions.outcomes_of`` (spec section 5) written out
@@ -364,7 +377,9 @@ class _BucketQueue:
         return cls(bucket_state, count,
                    np.zeros(cap, dtype=np.int64), np.zeros(cap, dtype=np.int64), empty.copy(), empty.copy(), ctr)
 
-    def arrays(self) -> tuple[NDArray[np.int64], ...]:
+    def arrays(self) -> tuple[NDArray[np.int32], NDArray[np.int64], NDArray[np.int64], NDArray[np.int64],
+                              NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        """The arrays ``_search`` takes, in its order."""
         return (self.bucket_state, self.count, self.cand_state, self.cand_key,
                 self.fifo_state, self.fifo_key, self.ctr)
 
@@ -379,8 +394,11 @@ class _BucketQueue:
 
 
 @numba.njit(cache=True, nogil=True)
-def _search(L, ny, nx, masks, remaining, costs, robust, packed, action,  # pragma: no cover
-            bucket_state, count, cand_state, cand_key, fifo_state, fifo_key, ctr, budget):
+def _search(  # pragma: no cover
+    L: int, ny: int, nx: int, masks: NDArray[np.uint64], remaining: NDArray[np.uint8], costs: NDArray[np.int64], robust: bool,
+    packed: NDArray[np.int64], action: NDArray[np.uint8], bucket_state: NDArray[np.int32], count: NDArray[np.int64],
+    cand_state: NDArray[np.int64], cand_key: NDArray[np.int64], fifo_state: NDArray[np.int64], fifo_key: NDArray[np.int64], ctr: NDArray[np.int64], budget: int,
+) -> int:
     """Settle states in value order until done, ``budget`` more are settled, or a buffer is full.
 
     Inside the open bucket (cost ``c``), states are taken in order of steps from
@@ -542,7 +560,7 @@ def _search(L, ny, nx, masks, remaining, costs, robust, packed, action,  # pragm
 
 
 @numba.njit(cache=True, nogil=True)
-def _sort_by_key(states, keys, m):  # pragma: no cover
+def _sort_by_key(states: NDArray[np.int64], keys: NDArray[np.int64], m: int) -> None:  # pragma: no cover
     """Sort the first ``m`` entries by key: a counting sort when the keys span little, else argsort."""
     lo = keys[0]
     hi = keys[0]
@@ -574,7 +592,7 @@ def _sort_by_key(states, keys, m):  # pragma: no cover
 
 
 @numba.njit(cache=True, nogil=True)
-def _unmark_settled(packed):  # pragma: no cover
+def _unmark_settled(packed: NDArray[np.int64]) -> None:  # pragma: no cover
     """Settled states hold ``~value`` during the search; restore their values."""
     for n in range(packed.size):
         if packed[n] < 0:

@@ -148,7 +148,10 @@ def build_transitions(
 
 
 @numba.njit(cache=True, nogil=True)
-def outcomes_of(flow_dir, reach, lateral, l, j, i, k, action, out):  # pragma: no cover - compiled
+def outcomes_of(  # pragma: no cover - compiled
+    flow_dir: NDArray[np.int8], reach: NDArray[np.int8], lateral: bool, l: int, j: int, i: int, k: int, action: int,
+    out: NDArray[np.int64],
+) -> int:
     """Write the distinct outcome state indices of ``action`` at ``(l, j, i, k)`` into ``out``.
 
     State indices are internal and heading-major, ``((k * L + l) * ny + j) * nx + i``,

@@ -303,7 +303,7 @@ def build_physical(
 
 
 @numba.njit(cache=True, nogil=True)
-def _interp(f, l, X, Y):  # pragma: no cover - compiled
+def _interp(f: NDArray[np.float64], l: int, X: float, Y: float) -> float:  # pragma: no cover - compiled
     """Bilinear value of layer ``l`` at fine-grid index point (X, Y), clamped to the grid; NaN when a
     node with non-zero weight is land."""
     nyf, nxf = f.shape[1], f.shape[2]
@@ -327,7 +327,10 @@ def _interp(f, l, X, Y):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _velocity(uf, vf, refine, la, lb, wb, x, y, lat0, dlat, dlon_rad, dy_m, we, wn):  # pragma: no cover
+def _velocity(  # pragma: no cover
+    uf: NDArray[np.float64], vf: NDArray[np.float64], refine: int, la: int, lb: int, wb: float, x: float, y: float,
+    lat0: float, dlat: float, dlon_rad: float, dy_m: float, we: float, wn: float,
+) -> tuple[float, float]:
     """(dx/dt, dy/dt) in planning cells per second at planning-index point (x, y); NaN on land.
 
     Over ground = through water (``we``, ``wn``, m/s, members' offsets included) + the current of
@@ -345,7 +348,10 @@ def _velocity(uf, vf, refine, la, lb, wb, x, y, lat0, dlat, dlon_rad, dy_m, we, 
 
 
 @numba.njit(cache=True, nogil=True)
-def _run(uf, vf, goal, refine, la, lb, glide_s, x0, y0, we, wn, t_max, h, lat0, dlat, dlon_rad, dy_m, nx, ny):  # pragma: no cover
+def _run(  # pragma: no cover
+    uf: NDArray[np.float64], vf: NDArray[np.float64], goal: NDArray[np.bool_], refine: int, la: int, lb: int, glide_s: float, x0: float, y0: float,
+    we: float, wn: float, t_max: float, h: float, lat0: float, dlat: float, dlon_rad: float, dy_m: float, nx: int, ny: int,
+) -> tuple[bool, float, float, float]:
     """Integrate one sample with RK4. Returns (ok, x, y, t).
 
     ``glide_s`` > 0: a glide from layer ``la`` to ``lb`` lasting exactly ``glide_s``; else a move
@@ -404,14 +410,17 @@ def _run(uf, vf, goal, refine, la, lb, glide_s, x0, y0, we, wn, t_max, h, lat0, 
 
 
 @numba.njit(cache=True, nogil=True)
-def _nearest(x):  # pragma: no cover
+def _nearest(x: float) -> int:  # pragma: no cover
     """Nearest index, halves going to the lower one (as ``Grid.nearest_cell``)."""
     return int(math.ceil(x - 0.5))
 
 
 @numba.njit(cache=True, parallel=True)
-def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth_m, course_rad, offsets, members,
-                  speed, glide_rate, t_max, rk4_steps, powers, count, emax, esum, tsum, hazard):  # pragma: no cover
+def _sample_cells(  # pragma: no cover
+    uf: NDArray[np.float64], vf: NDArray[np.float64], water: NDArray[np.bool_], goal: NDArray[np.bool_], refine: int, lat0: float, dlat: float, dlon_rad: float, dy_m: float,
+    depth_m: NDArray[np.float64], course_rad: NDArray[np.float64], offsets: NDArray[np.float64], members: NDArray[np.float64], speed: float, glide_rate: float, t_max: float,
+    rk4_steps: int, powers: NDArray[np.float64], count: NDArray[np.int32], emax: NDArray[np.float64], esum: NDArray[np.float64], tsum: NDArray[np.float64], hazard: NDArray[np.bool_],
+) -> None:
     L, ny, nx = water.shape
     n_off = offsets.shape[0]
     n_mem = members.shape[0]
@@ -476,7 +485,7 @@ def _sample_cells(uf, vf, water, goal, refine, lat0, dlat, dlon_rad, dy_m, depth
 
 
 @numba.njit(cache=True, inline="always")
-def _decode(s, L, ny, nx):  # pragma: no cover
+def _decode(s: int, L: int, ny: int, nx: int) -> tuple[int, int, int, int, int]:  # pragma: no cover
     """(k, cell, l, j, i) of an internal state index (heading-major, as ``PhysicalModel.state_index``)."""
     k = s // (L * ny * nx)
     c = s % (L * ny * nx)
@@ -484,7 +493,7 @@ def _decode(s, L, ny, nx):  # pragma: no cover
 
 
 @numba.njit(cache=True, inline="always")
-def _channel(a, k):  # pragma: no cover
+def _channel(a: int, k: int) -> int:  # pragma: no cover
     """The sample channel of a move action: DRIFT 0, UP 1, DOWN 2, FORWARD 3 + heading,
     FORWARD_LEFT 11 + heading, FORWARD_RIGHT 19 + heading."""
     if a == 0:
@@ -504,7 +513,10 @@ _PAIR_ACTIONS = np.array([0, 1, 2, 3, 4, 5, 8, 9], dtype=np.int64)
 
 
 @numba.njit(cache=True)
-def _pairs(count, emax, esum, tsum, hazard, water, rot_wh, rot_s, n_samples):  # pragma: no cover
+def _pairs(  # pragma: no cover
+    count: NDArray[np.int32], emax: NDArray[np.float64], esum: NDArray[np.float64], tsum: NDArray[np.float64], hazard: NDArray[np.bool_], water: NDArray[np.bool_], rot_wh: NDArray[np.float64], rot_s: float,
+    n_samples: int,
+) -> tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Flatten the per-cell samples into per-(state, action) outcome lists, states in index order."""
     L, ny, nx = water.shape
     n_states = 8 * L * ny * nx

@@ -34,7 +34,7 @@ from planner.contract.actions import Action
 from planner.contract.errors import PlannerError
 from planner.physical.model import PhysicalModel
 from planner.contract.settings import Goal
-from planner.paper.solve import GoalCells, locate_goal
+from planner.paper.solve import GoalCells, goal_cells_on
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,7 +85,8 @@ class PhysicalSolution:
         """Follow the policy from ``start`` taking each action's most likely outcome (ties: the one
         with the lower value), stopping at the goal, where no action is known, or at a repeat."""
         m = self.model
-        state = tuple(int(x) for x in start)
+        l, j, i, k = start
+        state = (int(l), int(j), int(i), int(k))
         path: list[PhysicalStep] = []
         seen: set[tuple[int, int, int, int]] = set()
         for _ in range(max_steps):
@@ -105,7 +106,7 @@ class PhysicalSolution:
 
 def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
     """Solve ``model`` under its settings' criterion (robust or expected)."""
-    goal_cells = locate_goal(model, goal)  # type: ignore[arg-type]  # needs only .grid and .water
+    goal_cells = goal_cells_on(model.grid, model.water, goal)
     L, ny, nx, K = model.grid.shape
     goal_states = np.flatnonzero(np.broadcast_to(goal_cells.mask[None], (K, L, ny, nx)).ravel())
     t0 = time.perf_counter()
@@ -139,7 +140,9 @@ def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
 
 
 @numba.njit(cache=True)
-def _robust(ptr, out_state, out_emax, pair_state, duration, goal_states, n_states):  # pragma: no cover
+def _robust(  # pragma: no cover
+    ptr: NDArray[np.int64], out_state: NDArray[np.int64], out_emax: NDArray[np.float64], pair_state: NDArray[np.int64], duration: NDArray[np.float64], goal_states: NDArray[np.int64], n_states: int,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     n_pairs = pair_state.size
     remaining = np.zeros(n_pairs, dtype=np.int64)
     rev_count = np.zeros(n_states + 1, dtype=np.int64)
@@ -204,12 +207,12 @@ def _robust(ptr, out_state, out_emax, pair_state, duration, goal_states, n_state
 
 
 @numba.njit(cache=True, inline="always")
-def _less(hk, hv, a, b):  # pragma: no cover
+def _less(hk: NDArray[np.float64], hv: NDArray[np.int64], a: int, b: int) -> bool:  # pragma: no cover
     return hk[a] < hk[b] or (hk[a] == hk[b] and hv[a] < hv[b])
 
 
 @numba.njit(cache=True)
-def _push(hk, hv, n, key, item):  # pragma: no cover
+def _push(hk: NDArray[np.float64], hv: NDArray[np.int64], n: int, key: float, item: int) -> int:  # pragma: no cover
     hk[n] = key
     hv[n] = item
     c = n
@@ -225,7 +228,7 @@ def _push(hk, hv, n, key, item):  # pragma: no cover
 
 
 @numba.njit(cache=True)
-def _pop(hk, hv, n):  # pragma: no cover
+def _pop(hk: NDArray[np.float64], hv: NDArray[np.int64], n: int) -> int:  # pragma: no cover
     n -= 1
     hk[0] = hk[n]
     hv[0] = hv[n]
@@ -328,7 +331,9 @@ def _best_pairs(q: NDArray, pair_state: NDArray, n: int) -> NDArray[np.int64]:
 
 
 @numba.njit(cache=True)
-def _proper_start(ptr, out_state, pair_state, is_goal, n_states):  # pragma: no cover
+def _proper_start(  # pragma: no cover
+    ptr: NDArray[np.int64], out_state: NDArray[np.int64], pair_state: NDArray[np.int64], is_goal: NDArray[np.bool_], n_states: int,
+) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
     """States that reach the goal with probability 1 under some policy, and a proper policy there.
 
     Repeat: a pair is usable when all its outcomes are alive; a backward search from the goal over

@@ -146,7 +146,7 @@ def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], 
             continue
         settings = settings_for(method, spec.mission.settings)
         key_model = "physical-expected" if method == "open-loop" else method
-        schedule = []
+        schedule: list[tuple[float, PolicyTable]] = []
         for t, index in zip(times, steps):
             key = (key_model, index)
             if key not in cache:
@@ -283,8 +283,10 @@ def resolution_change(campaign: Campaign, methods: Sequence[str] = ("physical-ex
             a, b = start_state(coarse.table, s), start_state(fine.table, s)
             if a is None or b is None:
                 continue
-            va = float(coarse.solution.value_wh[a])  # type: ignore[union-attr]
-            vb = float(fine.solution.value_wh[b])  # type: ignore[union-attr]
+            coarse_sol, fine_sol = coarse.solution, fine.solution
+            assert isinstance(coarse_sol, PhysicalSolution) and isinstance(fine_sol, PhysicalSolution)  # in Wh
+            va = float(coarse_sol.value_wh[a])
+            vb = float(fine_sol.value_wh[b])
             if math.isfinite(va) and math.isfinite(vb) and va > 0:
                 changes.append(abs(vb / va - 1.0))
         arr = np.array(changes) if changes else np.array([math.nan])

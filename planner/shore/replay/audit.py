@@ -200,7 +200,7 @@ def audit(dive: DiveLog) -> AuditResult:
 
 def _table(tables: Mapping[str, PolicyTable], p: Mapping[str, Any], dive: DiveLog) -> PolicyTable:
     crc = p.get("table_crc32")
-    if crc not in tables:
+    if not isinstance(crc, str) or crc not in tables:  # the tables are keyed by their CRC's text
         raise LogError(f"{dive.path}: the loaded table {crc} is not attached to the log; cannot run the helm again")
     return tables[crc]
 

@@ -105,7 +105,7 @@ class Dive:
         return None if self.unix_offset_s is None else time_s + self.unix_offset_s
 
 
-_LEVEL_NAMES = {int(v): v.name.lower() for v in LogLevel}
+_LEVEL_NAMES: dict[object, str] = {int(v): v.name.lower() for v in LogLevel}  # looked up with whatever was logged
 
 
 def load_dive(log: DiveLog) -> Dive:

@@ -11,8 +11,10 @@ The plan is accepted only if it gives the table's actions, state for state.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,10 +22,10 @@ from numpy.typing import NDArray
 from planner.contract.errors import ShoreError
 from planner.forecast import file_identity
 from planner.contract.geodesy import BBox
-from planner.physical.solve import PhysicalSolution
+from planner.physical.solve import PhysicalSolution, PhysicalStep
 from planner.pipeline import PlanRequest, PlanResult, make_plan
-from planner.contract.settings import Costs, Goal, PhysicalSettings, PlanSettings
-from planner.paper.solve import nominal_path
+from planner.contract.settings import Costs, Criterion, Goal, Model, PhysicalSettings, PlanSettings, Uncertainty
+from planner.paper.solve import PathStep, nominal_path
 from planner.contract.table import PolicyTable
 from planner.contract.vehicle import VehicleParams
 
@@ -72,15 +74,18 @@ def table_settings(table: PolicyTable) -> PlanSettings:
     if table.physical is not None:
         try:
             # A table from before course offsets existed planned with the eight bearings only.
-            sampling = {"course_offsets": False, **table.physical.get("sampling", {})}
-            physical = PhysicalSettings(**sampling)  # type: ignore[arg-type]
-            vehicle = VehicleParams(**table.physical.get("vehicle", {}))  # type: ignore[arg-type]
+            # Header values as read: the constructors check each key and value.
+            sampling: dict[str, Any] = {"course_offsets": False, **table.physical.get("sampling", {})}
+            figures: dict[str, Any] = table.physical.get("vehicle", {})
+            physical = PhysicalSettings(**sampling)
+            vehicle = VehicleParams(**figures)
         except TypeError as exc:  # a key this version does not know
             raise ShoreError(f"{name}: header physical: {exc}; planned by a newer planner?") from None
         except ValueError as exc:
             raise ShoreError(f"{name}: header physical: {exc}") from None
-    return PlanSettings(model=table.model, criterion=table.criterion,  # type: ignore[arg-type]
-                        uncertainty=table.uncertainty,  # type: ignore[arg-type]
+    # The header's words as read: PlanSettings checks them, with its own messages.
+    return PlanSettings(model=cast(Model, table.model), criterion=cast(Criterion, table.criterion),
+                        uncertainty=cast(Uncertainty, table.uncertainty),
                         costs=costs, physical=physical, vehicle=vehicle)
 
 
@@ -128,10 +133,13 @@ def nominal_from(result: PlanResult, start: tuple[int, int, int, int]) -> Nomina
     grid = result.grid
     sol = result.solution
     physical = isinstance(sol, PhysicalSolution)
-    steps = sol.nominal(start) if physical else nominal_path(sol, start)  # type: ignore[union-attr, arg-type]
+    steps: Sequence[PathStep | PhysicalStep]
+    if isinstance(sol, PhysicalSolution):
+        steps, time_s = sol.nominal(start), float(sol.time_s[tuple(start)])
+    else:
+        steps, time_s = nominal_path(sol, start), None
     return NominalPath(
         lon_deg=np.array([grid.lon_deg[s.i] for s in steps]), lat_deg=np.array([grid.lat_deg[s.j] for s in steps]),
         depth_m=np.array([grid.depth_m[s.l] for s in steps]), actions=tuple(s.action.name for s in steps),
-        cost=sol.value(*start)[0], cost_unit="Wh" if physical else "cost units",
-        time_s=float(sol.time_s[tuple(start)]) if physical else None,  # type: ignore[union-attr]
+        cost=sol.value(*start)[0], cost_unit="Wh" if physical else "cost units", time_s=time_s,
     )

@@ -217,13 +217,14 @@ def format_summary(s: DiveSummary) -> str:
     lines.append(f"failsafes  {len(s.failsafes)}" + ("" if s.failsafes else " (none)"))
     for f in s.failsafes:
         lines.append(f"  {f.start_s:10.1f} s  {f.situation} for {f.end_s - f.start_s:.0f} s")
-    for e in s.errors:
-        lines.append(f"  error  {e}")
-    for g in s.goals_reached:
-        lines.append(f"goal {g.goal_index:<5} reached at {g.time_s:.1f} s vehicle time ({_h(g.after_s)} after the start)")
+    for error in s.errors:
+        lines.append(f"  error  {error}")
+    for reached in s.goals_reached:
+        lines.append(f"goal {reached.goal_index:<5} reached at {reached.time_s:.1f} s vehicle time"
+                     f" ({_h(reached.after_s)} after the start)")
     missing = [g for g in s.goals_loaded if g not in {r.goal_index for r in s.goals_reached}]
-    for g in missing:
-        lines.append(f"goal {g:<5} NOT reached")
+    for goal_index in missing:
+        lines.append(f"goal {goal_index:<5} NOT reached")
     if s.deviation is not None:
         d = s.deviation
         lines.append(f"deviation  largest from the nominal path {d.distance_m:.0f} m at {d.time_s:.1f} s"
