@@ -280,7 +280,7 @@ def test_bad_windows_are_refused_naming_the_file(synthetic_forecast: Path, monke
         open_forecast(synthetic_forecast, bbox=_box(10.0, 50.0, 11.0, 51.0))
     with pytest.raises(ForecastError, match="lies outside the forecast"):
         open_forecast(synthetic_forecast, bbox=_box(-118.2, 33.8, -118.0, 34.0))  # north of it
-    monkeypatch.setattr("planner.forecast.MAX_VALUES_PER_VARIABLE", 300)
+    monkeypatch.setattr("planner.forecast.lazy.MAX_VALUES_PER_VARIABLE", 300)
     with pytest.raises(ForecastError, match=r"the part of variable u to read \(time step 0 of 25; lon .*\) holds 440 values \(time 1 x depth 4 x lat 10 x lon 11\)"):
         open_forecast(synthetic_forecast, bbox=_box(-118.1, 33.4, -118.05, 33.45), time_index=0)
     assert open_forecast(synthetic_forecast, bbox=_box(-118.1, 33.4, -118.09, 33.41), time_index=0).shape == (1, 4, 6, 6)
@@ -440,7 +440,7 @@ def _bytes_read() -> int:
 @pytest.mark.skipif(not os.path.exists("/proc/self/io"), reason="needs Linux /proc/self/io")
 def test_window_reads_only_its_part_of_the_file(tmp_path: Path) -> None:
     """Bytes read while opening: the file once for its hash, the header, and the window's chunks; not the rest."""
-    from planner.forecast import _lazy
+    from planner.forecast.lazy import lazy_variable as _lazy
 
     path = tmp_path / "mid.nc"
     velocity_bytes = write_large(path, n_t=80, n_z=2, n_y=200, n_x=250)  # 64 MB of u and v

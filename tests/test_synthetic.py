@@ -274,7 +274,7 @@ def test_does_not_use_the_reader() -> None:
     tree = ast.parse(pathlib.Path(synthetic.__file__).read_text())
     imported = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)}
     imported |= {alias.name for node in ast.walk(tree) if isinstance(node, ast.Import) for alias in node.names}
-    assert {m for m in imported if m and m.startswith("planner")} <= {"planner.contract.errors", "planner.contract.atomic", "planner.contract.geodesy"}
+    assert {m for m in imported if m and m.startswith("planner")} <= {"planner.contract.errors", "planner.contract.atomic", "planner.contract.geodesy", "planner.forecast.synthetic.cf_writer"}
 
 
 def test_settings_accept_lists_and_stay_hashable() -> None:

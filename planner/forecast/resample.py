@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.contract.errors import ForecastError, GridError
-from planner.forecast import Forecast, is_periodic_lon
+from planner.forecast.model import Forecast, is_periodic_lon
 from planner.grid import Grid
 
 # Barycentric weights below this are exactly zero (brief for spec section 1, curvilinear grids).

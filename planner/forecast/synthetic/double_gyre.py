@@ -35,8 +35,8 @@ timing error) or ``replace(truth, peak_speed_m_s=0.4)`` (a strength error), and
 flies the vehicle in ``gyre_velocity(truth, ...)``.
 
 The file layout, CF attributes, encoding and atomic writing are those of
-``planner.forecast.synthetic.scb``, whose helpers are reused; ``planner.forecast`` reads the
-file like any model file.
+``planner.forecast.synthetic.scb`` (``planner.forecast.synthetic.cf_writer``); ``planner.forecast``
+reads the file like any model file.
 """
 
 from __future__ import annotations
@@ -53,15 +53,28 @@ import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
 from planner.contract.arguments import floats
-from planner.contract.atomic import atomic_target
 from planner.contract.errors import LrauvError, PlannerError
 from planner.contract.geodesy import EARTH_RADIUS_M
-from planner.forecast.synthetic.scb import _counts, _encoding, _parse_time, _with_numeric_time
+from planner.forecast.synthetic.cf_writer import (
+    DIMS,
+    U_ATTRS,
+    V_ATTRS,
+    coordinates,
+    grid_counts,
+    lon_lat_axes,
+    netcdf_encoding,
+    parse_time,
+    set_time_units,
+    with_numeric_time,
+    write_netcdf,
+)
 
 __all__ = [
     "GENERATOR_VERSION",
     "DoubleGyreSettings",
     "box_size_m",
+    "global_attrs",
+    "gyre_axes",
     "gyre_velocity",
     "settings_from_args",
     "synthesize_gyre",
@@ -134,7 +147,7 @@ class DoubleGyreSettings:
                and -90.0 < self.south_deg and self.north_deg < 90.0 and self.east_deg - self.west_deg <= 360.0,
                "bbox", "WEST < EAST and -90 < SOUTH < NORTH < 90", box)
         _check(self.spacing_deg > 0, "spacing_deg", "a number > 0", self.spacing_deg)
-        nx, ny = _counts(self)  # type: ignore[arg-type]  # duck-typed: reads the box and spacing only
+        nx, ny = grid_counts(self)
         _check(nx >= 2 and ny >= 2, "spacing_deg", f"small enough for 2 points per axis in the box {box}",
                self.spacing_deg)
         depths = np.asarray(self.depths_m)
@@ -147,7 +160,7 @@ class DoubleGyreSettings:
             raise _FieldError("hours, step_h", f"double gyre settings: `step_h` must be at most `hours` "
                               f"(two time steps at least); got step_h={self.step_h:g}, hours={self.hours:g}")
         try:
-            _parse_time(self.issue_time)
+            parse_time(self.issue_time)
         except LrauvError:
             _check(False, "issue_time", "an ISO 8601 time like 2026-01-15T00:00:00Z", self.issue_time)
         _check(self.peak_speed_m_s > 0, "peak_speed_m_s", "a speed > 0 in m/s", self.peak_speed_m_s)
@@ -194,11 +207,9 @@ def gyre_velocity(
     return u, v
 
 
-def _axes(settings: DoubleGyreSettings) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def gyre_axes(settings: DoubleGyreSettings) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Longitudes ``(nx,)``, latitudes ``(ny,)`` on the box edges, and the time axis in hours."""
-    nx, ny = _counts(settings)  # type: ignore[arg-type]
-    lon = np.linspace(settings.west_deg, settings.east_deg, nx)
-    lat = np.linspace(settings.south_deg, settings.north_deg, ny)
+    lon, lat = lon_lat_axes(settings)
     n_t = int(math.floor(settings.hours / settings.step_h + 1e-9)) + 1
     return lon, lat, np.arange(n_t, dtype=np.float64) * settings.step_h
 
@@ -209,7 +220,7 @@ def synthesize_gyre(settings: DoubleGyreSettings = DoubleGyreSettings()) -> xr.D
     Variables ``u``, ``v`` (float32, m/s) have dims ``(time, depth, lat, lon)``;
     every layer holds the same field. The time axis is hours since ``issue_time``.
     """
-    lon, lat, hours = _axes(settings)
+    lon, lat, hours = gyre_axes(settings)
     depth = np.asarray(settings.depths_m, dtype=np.float64)
     u, v = gyre_velocity(settings, lon[None, :], lat[:, None], hours[:, None, None] * 3600.0)
     shape = (hours.size, depth.size, lat.size, lon.size)
@@ -226,12 +237,8 @@ def write_gyre(
     Readers never see a partial file; a failure leaves the old file, if any, and
     no temporary file. Missing parent folders are created. Returns the path.
     """
-    target = pathlib.Path(path)
-    ds = _with_numeric_time(synthesize_gyre(settings))
-    encoding = {name: enc for name, enc in _encoding(ds).items() if name in ds.variables}
-    with atomic_target(target) as tmp:
-        ds.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=encoding)
-    return target
+    ds = with_numeric_time(synthesize_gyre(settings))
+    return write_netcdf(path, ds, netcdf_encoding(ds))
 
 
 # --------------------------------------------------------------------------- dataset
@@ -247,31 +254,19 @@ def _dataset(
     v: NDArray[np.float32],
 ) -> xr.Dataset:
     """Wrap the arrays in CF-1.8 metadata, as ``planner.forecast.synthetic.scb`` does."""
-    issued = _parse_time(settings.issue_time)
+    issued = parse_time(settings.issue_time)
     origin = issued.replace(tzinfo=None)
     times = np.datetime64(origin, "ns") + np.round(hours * 3.6e12).astype("timedelta64[ns]")
-    dims = ("time", "depth", "lat", "lon")
-    u_attrs = {"standard_name": "eastward_sea_water_velocity", "long_name": "eastward current", "units": "m s-1"}
-    v_attrs = {"standard_name": "northward_sea_water_velocity", "long_name": "northward current", "units": "m s-1"}
     ds = xr.Dataset(
-        data_vars={"u": (dims, u, u_attrs), "v": (dims, v, v_attrs)},
-        coords={
-            "time": ("time", times, {"standard_name": "time", "long_name": "time", "axis": "T"}),
-            "depth": ("depth", depth, {"standard_name": "depth", "long_name": "depth below sea surface",
-                                       "units": "m", "positive": "down", "axis": "Z"}),
-            "lat": ("lat", lat, {"standard_name": "latitude", "long_name": "latitude",
-                                 "units": "degrees_north", "axis": "Y"}),
-            "lon": ("lon", lon, {"standard_name": "longitude", "long_name": "longitude",
-                                 "units": "degrees_east", "axis": "X"}),
-        },
-        attrs=_global_attrs(settings, issued, float(hours[-1])),
+        data_vars={"u": (DIMS, u, dict(U_ATTRS)), "v": (DIMS, v, dict(V_ATTRS))},
+        coords=coordinates(times, depth, lat, lon),
+        attrs=global_attrs(settings, issued, float(hours[-1])),
     )
-    ds["time"].encoding.update({"units": f"hours since {origin:%Y-%m-%d %H:%M:%S}", "calendar": "standard",
-                                "dtype": "float64"})
+    set_time_units(ds, origin)
     return ds
 
 
-def _global_attrs(settings: DoubleGyreSettings, issued: dt.datetime, last_h: float) -> dict[str, object]:
+def global_attrs(settings: DoubleGyreSettings, issued: dt.datetime, last_h: float) -> dict[str, object]:
     """Global attributes: CF-1.8 plus ACDD discovery fields and the gyre's parameters."""
     s = settings
     end = issued + dt.timedelta(hours=last_h)

@@ -56,10 +56,10 @@ from dataclasses import replace
 import numpy as np
 import xarray as xr
 
-from planner.forecast.synthetic import double_gyre, scb
-from planner.contract.atomic import atomic_target
-from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, synthesize_gyre
 from planner.contract.errors import PlannerError
+from planner.forecast.synthetic import double_gyre, scb
+from planner.forecast.synthetic.cf_writer import netcdf_encoding, parse_time, with_numeric_time, write_netcdf
+from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, synthesize_gyre
 from planner.forecast.synthetic.scb import SyntheticSettings, synthesize
 
 __all__ = [
@@ -135,8 +135,8 @@ def synthesize_gyre_ensemble(
     """The gyre ensemble as a CF-1.8 dataset (time as float hours, ready to write); dims in the module docstring."""
     member_settings = gyre_ensemble(settings, members, seed, spread)
     datasets = [synthesize_gyre(s) for s in member_settings]
-    _lon, _lat, hours = double_gyre._axes(settings)
-    attrs = double_gyre._global_attrs(settings, scb._parse_time(settings.issue_time), float(hours[-1]))
+    _lon, _lat, hours = double_gyre.gyre_axes(settings)
+    attrs = double_gyre.global_attrs(settings, parse_time(settings.issue_time), float(hours[-1]))
     for key in ("gyre_peak_speed_m_s", "gyre_eps", "gyre_phase_rad"):
         del attrs[key]  # per member: variables member_*
     attrs["settings"] = repr(settings)
@@ -199,7 +199,7 @@ def synthesize_scb_ensemble(settings: SyntheticSettings, members: int, issue: in
     datasets = [synthesize(s, issue_number=issue) for s in member_settings]
     issued = scb.issue_datetime(settings, issue_number=issue)
     n = len(datasets)
-    attrs = scb._global_attrs(settings, issue, issued, f"forecast issue {issue}, ensemble of {n}")
+    attrs = scb.global_attrs(settings, issue, issued, f"forecast issue {issue}, ensemble of {n}")
     relative = settings.error_scale * settings.error_decay**issue
     attrs.update({
         "history": (f"created by planner.forecast.synthetic.ensemble v{ENSEMBLE_VERSION} from planner.forecast.synthetic.scb "
@@ -238,7 +238,7 @@ def _stack(
     extra: dict[str, tuple[list[object], type, dict[str, str]]],
 ) -> xr.Dataset:
     """Members' datasets (same grid and times) as one dataset with ``u``, ``v`` along a leading ``member``."""
-    first = scb._with_numeric_time(datasets[0])
+    first = with_numeric_time(datasets[0])
     n = len(datasets)
     data_vars: dict[str, object] = {}
     for name in ("u", "v"):
@@ -256,7 +256,7 @@ def _stack(
 
 def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
     """The single files' encoding, chunked one member and one time step at a time."""
-    encoding = {name: dict(enc) for name, enc in scb._encoding(ds).items() if name in ds.variables}
+    encoding = {name: dict(enc) for name, enc in netcdf_encoding(ds).items()}
     for name in ("u", "v"):
         encoding[name]["chunksizes"] = (1, *encoding[name]["chunksizes"])  # type: ignore[misc]
     encoding[MEMBER_DIM] = {"dtype": "int32", "_FillValue": None}
@@ -267,11 +267,7 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
 
 
 def _write(path: str | os.PathLike[str], ds: xr.Dataset) -> pathlib.Path:
-    target = pathlib.Path(path)
-    encoding = _encoding(ds)
-    with atomic_target(target) as tmp:
-        ds.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=encoding)
-    return target
+    return write_netcdf(path, ds, _encoding(ds))
 
 
 # --------------------------------------------------------------------------- command line

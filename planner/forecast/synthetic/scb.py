@@ -51,8 +51,9 @@ Times: ``current_at`` takes seconds since ``settings.issue_time`` (the start of
 the scenario and the issue time of issue 0) for truth and every issue alike;
 a file's time axis is "hours since" its own issue time.
 
-Only ``planner.contract.errors`` is imported from the planner: ``planner.forecast`` reads
-these files exactly as it reads a model's.
+Nothing of the reader is imported (only ``planner.contract`` and the writer's
+``planner.forecast.synthetic.cf_writer``): ``planner.forecast`` reads these files exactly as it
+reads a model's.
 """
 
 from __future__ import annotations
@@ -67,15 +68,28 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from planner.contract.atomic import atomic_target
 from planner.contract.errors import PlannerError
 from planner.contract.geodesy import M_PER_DEG_LAT
+from planner.forecast.synthetic.cf_writer import (
+    DIMS,
+    U_ATTRS,
+    V_ATTRS,
+    coordinates,
+    grid_counts,
+    lon_lat_axes,
+    netcdf_encoding,
+    parse_time,
+    set_time_units,
+    with_numeric_time,
+    write_netcdf,
+)
 
 __all__ = [
     "GENERATOR_VERSION",
     "SyntheticSettings",
     "bottom_depth_m",
     "current_at",
+    "global_attrs",
     "issue_datetime",
     "synthesize",
     "write_synthetic",
@@ -130,33 +144,6 @@ def _check_issue(issue_number: int | None) -> int | None:
 
 def _issue_offset_h(settings: SyntheticSettings, issue_number: int | None) -> float:
     return 0.0 if issue_number is None else issue_number * settings.issue_interval_h
-
-
-def _parse_time(text: str) -> dt.datetime:
-    """ISO 8601 time; without a zone it is UTC. Returns an aware UTC datetime."""
-    try:
-        parsed = dt.datetime.fromisoformat(str(text).strip())
-    except ValueError:
-        raise PlannerError(
-            f"synthetic settings: `issue_time` must be an ISO 8601 time like 2026-01-15T00:00:00Z; got {text!r}"
-        ) from None
-    if parsed.tzinfo is None:
-        parsed = parsed.replace(tzinfo=dt.timezone.utc)
-    return parsed.astimezone(dt.timezone.utc)
-
-
-def _counts(settings: SyntheticSettings) -> tuple[int, int]:
-    nx = int(round((settings.east_deg - settings.west_deg) / settings.spacing_deg)) + 1
-    ny = int(round((settings.north_deg - settings.south_deg) / settings.spacing_deg)) + 1
-    return nx, ny
-
-
-def _axes(settings: SyntheticSettings) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Longitudes ``(nx,)`` and latitudes ``(ny,)``, points on the box edges (spec section 1)."""
-    nx, ny = _counts(settings)
-    lon = np.linspace(settings.west_deg, settings.east_deg, nx)
-    lat = np.linspace(settings.south_deg, settings.north_deg, ny)
-    return lon, lat
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -237,13 +224,13 @@ class SyntheticSettings:
         values = (self.west_deg, self.south_deg, self.east_deg, self.north_deg)
         _check(bool(np.all(np.isfinite(values))) and self.west_deg < self.east_deg and self.south_deg < self.north_deg,
                "bbox", "finite WEST < EAST and SOUTH < NORTH", values)
-        nx, ny = _counts(self)
+        nx, ny = grid_counts(self)
         _check(nx >= 2 and ny >= 2, "spacing_deg", "at least 2 points per axis in the box", self.spacing_deg)
         depths = np.asarray(self.depths_m, dtype=np.float64)
         _check(depths.ndim == 1 and depths.size >= 1 and bool(np.all(np.isfinite(depths)))
                and bool(np.all(depths >= 0)) and bool(np.all(np.diff(depths) > 0)),
                "depths_m", "non-negative depths in metres, strictly increasing", self.depths_m)
-        _parse_time(self.issue_time)
+        parse_time(self.issue_time)
         _check(isinstance(self.n_eddies, int) and self.n_eddies >= 0, "n_eddies", "an integer >= 0", self.n_eddies)
         _check(isinstance(self.n_waves, int) and self.n_waves >= 0, "n_waves", "an integer >= 0", self.n_waves)
         r_lo, r_hi = self.eddy_radius_km
@@ -277,7 +264,7 @@ def synthesize(settings: SyntheticSettings = SyntheticSettings(), *, issue_numbe
     ``v`` (float32, m/s, NaN on land) have dims ``(time, depth, lat, lon)``.
     """
     n = _check_issue(issue_number)
-    lon, lat = _axes(settings)
+    lon, lat = lon_lat_axes(settings)
     depth = np.asarray(settings.depths_m, dtype=np.float64)
     hours = np.arange(settings.hours + 1, dtype=np.float64)
     t_s = (hours + _issue_offset_h(settings, n)) * 3600.0
@@ -298,12 +285,8 @@ def write_synthetic(
     place with ``os.replace``; readers never see a partial file, and a failure
     leaves no temporary file behind. Returns the path written.
     """
-    target = pathlib.Path(path)
-    ds = synthesize(settings, issue_number=issue_number)
-    with atomic_target(target) as tmp:
-        ds_file = _with_numeric_time(ds)
-        ds_file.to_netcdf(tmp, mode="w", format="NETCDF4", engine="netcdf4", encoding=_encoding(ds_file))
-    return target
+    ds_file = with_numeric_time(synthesize(settings, issue_number=issue_number))
+    return write_netcdf(path, ds_file, netcdf_encoding(ds_file))
 
 
 def current_at(
@@ -336,7 +319,7 @@ def bottom_depth_m(settings: SyntheticSettings, lon_deg: ArrayLike, lat_deg: Arr
 def issue_datetime(settings: SyntheticSettings, *, issue_number: int | None) -> dt.datetime:
     """Issue time (UTC, aware) of issue ``n``, ``issue_time + n * issue_interval_h``; the truth's is ``issue_time``."""
     n = _check_issue(issue_number)
-    return _parse_time(settings.issue_time) + dt.timedelta(hours=_issue_offset_h(settings, n))
+    return parse_time(settings.issue_time) + dt.timedelta(hours=_issue_offset_h(settings, n))
 
 
 # --------------------------------------------------------------------------- scene
@@ -615,7 +598,7 @@ def _error_gain(settings: SyntheticSettings, issue_number: int) -> float:
     issue ``n``'s window, before clipping.
     """
     target = settings.error_scale * settings.error_decay**issue_number
-    lon, lat = _axes(settings)
+    lon, lat = lon_lat_axes(settings)
     depth = np.asarray(settings.depths_m, dtype=np.float64)
     t_s = (np.arange(settings.hours + 1, dtype=np.float64) + _issue_offset_h(settings, issue_number)) * 3600.0
     lon_b, lat_b = np.broadcast_arrays(lon[None, None, None, :], lat[None, None, :, None])
@@ -647,38 +630,26 @@ def _dataset(
     issued = issue_datetime(settings, issue_number=issue_number)
     origin = issued.replace(tzinfo=None)
     times = np.datetime64(origin, "ns") + (hours * 3600.0).astype("timedelta64[s]").astype("timedelta64[ns]")
-    dims = ("time", "depth", "lat", "lon")
     kind = "truth" if issue_number is None else f"forecast issue {issue_number}"
-    u_attrs = {"standard_name": "eastward_sea_water_velocity", "long_name": "eastward current", "units": "m s-1"}
-    v_attrs = {"standard_name": "northward_sea_water_velocity", "long_name": "northward current", "units": "m s-1"}
     geo = _coast_geometry(settings, *np.broadcast_arrays(lon[None, :], lat[:, None]))
     ds = xr.Dataset(
         data_vars={
-            "u": (dims, u, u_attrs),
-            "v": (dims, v, v_attrs),
+            "u": (DIMS, u, dict(U_ATTRS)),
+            "v": (DIMS, v, dict(V_ATTRS)),
             "h": (("lat", "lon"), np.where(geo.bottom_m > 0.0, geo.bottom_m, np.nan).astype(np.float32), {
                 "standard_name": "sea_floor_depth_below_sea_surface",
                 "long_name": "synthetic bathymetry; a cell is land at layers no shallower than this",
                 "units": "m",
             }),
         },
-        coords={
-            "time": ("time", times, {"standard_name": "time", "long_name": "time", "axis": "T"}),
-            "depth": ("depth", depth, {"standard_name": "depth", "long_name": "depth below sea surface",
-                                       "units": "m", "positive": "down", "axis": "Z"}),
-            "lat": ("lat", lat, {"standard_name": "latitude", "long_name": "latitude",
-                                 "units": "degrees_north", "axis": "Y"}),
-            "lon": ("lon", lon, {"standard_name": "longitude", "long_name": "longitude",
-                                 "units": "degrees_east", "axis": "X"}),
-        },
-        attrs=_global_attrs(settings, issue_number, issued, kind),
+        coords=coordinates(times, depth, lat, lon),
+        attrs=global_attrs(settings, issue_number, issued, kind),
     )
-    ds["time"].encoding.update({"units": f"hours since {origin:%Y-%m-%d %H:%M:%S}", "calendar": "standard",
-                                "dtype": "float64"})
+    set_time_units(ds, origin)
     return ds
 
 
-def _global_attrs(
+def global_attrs(
     settings: SyntheticSettings, issue_number: int | None, issued: dt.datetime, kind: str
 ) -> dict[str, object]:
     """Global attributes: CF-1.8 plus ACDD discovery fields and the generator's inputs."""
@@ -701,7 +672,7 @@ def _global_attrs(
         "synthetic_role": "truth" if issue_number is None else "forecast",
         "issue_time": f"{issued:%Y-%m-%dT%H:%M:%SZ}",
         "forecast_reference_time": f"{issued:%Y-%m-%dT%H:%M:%SZ}",
-        "scenario_start_time": f"{_parse_time(settings.issue_time):%Y-%m-%dT%H:%M:%SZ}",
+        "scenario_start_time": f"{parse_time(settings.issue_time):%Y-%m-%dT%H:%M:%SZ}",
         "issue_interval_hours": float(settings.issue_interval_h),
         "error_scale": float(settings.error_scale),
         "error_decay": float(settings.error_decay),
@@ -722,32 +693,3 @@ def _global_attrs(
         if settings.error_draw is not None:
             attrs["error_draw"] = np.int64(settings.error_draw)
     return attrs
-
-
-def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
-    """netCDF encoding: float32 velocities with NaN fill, compressed per time step; no fill on coordinates."""
-    chunks = (1, ds.sizes["depth"], ds.sizes["lat"], ds.sizes["lon"])
-    velocity = {"dtype": "float32", "_FillValue": np.float32(np.nan), "zlib": True, "complevel": 4,
-                "shuffle": True, "chunksizes": chunks}
-    return {
-        "u": dict(velocity),
-        "v": dict(velocity),
-        "h": {"dtype": "float32", "_FillValue": np.float32(np.nan)},
-        "lat": {"_FillValue": None},
-        "lon": {"_FillValue": None},
-        "depth": {"_FillValue": None},
-        "time": {"dtype": "float64", "_FillValue": None},
-    }
-
-
-def _with_numeric_time(ds: xr.Dataset) -> xr.Dataset:
-    """The time axis as float hours with its CF units and calendar as attributes.
-
-    xarray would otherwise rewrite ``hours since 2026-01-15 00:00:00`` as
-    ``hours since 2026-01-15``; both are CF, but the file should say the issue time in full.
-    """
-    units = ds["time"].encoding["units"]
-    origin = np.datetime64(dt.datetime.strptime(units.removeprefix("hours since "), "%Y-%m-%d %H:%M:%S"), "ns")
-    hours = (ds["time"].values - origin) / np.timedelta64(1, "h")
-    attrs = {**ds["time"].attrs, "units": units, "calendar": ds["time"].encoding["calendar"]}
-    return ds.assign_coords(time=("time", hours.astype(np.float64), attrs))
