@@ -14,10 +14,11 @@ its log and, when the planning forecast was found, the plan made again from it
 - ``index.html``: the pictures with the summary text, and a note for each
   picture that could not be drawn (or was drawn without something).
 
-The pictures use ``planner.shore.plots``'s figure set-up, colours and map helpers
-(matplotlib on an explicit Agg canvas, imported lazily). A long dive (the demo
-log has 132,207 decisions) is thinned for drawing: the track becomes one
-polyline per run of one action, with at most a few thousand points in all.
+The pictures use the figure set-up and colours of ``planner.shore.plots.style``
+and the map helpers of ``planner.shore.plots.map_axes`` (matplotlib on an
+explicit Agg canvas, imported lazily). A long dive (the demo log has 132,207
+decisions) is thinned for drawing: the track becomes one polyline per run of
+one action, with at most a few thousand points in all.
 Every file is written atomically (``planner.contract.atomic``).
 """
 
@@ -38,23 +39,19 @@ from planner.contract.actions import Action
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import LrauvError
 from planner.grid import Grid
-from planner.shore.plots import (
+from planner.shore.plots.map_axes import cell_edges, cos_lat, draw_land, draw_outline, geo_axes
+from planner.shore.plots.style import (
     ACTION_COLORS,
     FLOW_ARROW_COLOR,
     GOAL_COLOR,
     LAND_COLOR,
     START_COLOR,
     WATER_COLOR,
-    _action_label,
-    _cos_lat,
-    _draw_land,
-    _draw_outline,
-    _edges,
-    _figure,
-    _geo_axes,
-    _matplotlib,
-    _nice_speed,
-    _save,
+    action_label,
+    load_matplotlib,
+    new_figure,
+    nice_speed,
+    save_png,
 )
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -313,7 +310,7 @@ def _action_name(action: str | None) -> str:
     if action is None:
         return "not following (safe behaviour)"
     try:
-        return _action_label(Action[action])
+        return action_label(Action[action])
     except KeyError:
         return action
 
@@ -363,19 +360,19 @@ def _plot_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: 
         ys.append(nominal.lat_deg)
     radius = max(t.goal_radius_cells for t in goals)
     extent = _map_extent(grid, np.concatenate(xs), np.concatenate(ys), margin_cells=radius + 2.5)
-    mpl = _matplotlib()
+    mpl = load_matplotlib()
     width = 7.2
-    ratio = (extent[3] - extent[2]) / ((extent[1] - extent[0]) * _cos_lat(grid))
-    fig = _figure(mpl, width + 0.8, float(np.clip(width * ratio, 3.0, 8.5)) + 2.0)
+    ratio = (extent[3] - extent[2]) / ((extent[1] - extent[0]) * cos_lat(grid))
+    fig = new_figure(mpl, width + 0.8, float(np.clip(width * ratio, 3.0, 8.5)) + 2.0)
     ax = fig.subplots()
     ax.set_facecolor(WATER_COLOR)
-    _draw_land(mpl, ax, grid, ~table.water[0])
+    draw_land(mpl, ax, grid, ~table.water[0])
     handles: list[Any] = []
 
     if plan is not None:
         quiver = _draw_currents(mpl, ax, plan, extent)
         if quiver is not None:
-            key = _nice_speed(0.5 * float(np.nanpercentile(np.hypot(plan.u_m_s[0], plan.v_m_s[0]), 98)))
+            key = nice_speed(0.5 * float(np.nanpercentile(np.hypot(plan.u_m_s[0], plan.v_m_s[0]), 98)))
             ax.quiverkey(quiver, 0.86, 1.012, key, f"{key:g} m/s", labelpos="E", coordinates="axes", color="0.3",
                          fontproperties={"size": 8})
             handles.append(mpl.lines.Line2D([], [], color=FLOW_ARROW_COLOR, marker=r"$\rightarrow$", linestyle="none",
@@ -401,7 +398,7 @@ def _plot_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: 
     for t in goals:
         goal = _goal_mask(t)
         if goal is not None:
-            _draw_outline(mpl, ax, grid, goal[1], color=GOAL_COLOR, linewidth=2.0)
+            draw_outline(mpl, ax, grid, goal[1], color=GOAL_COLOR, linewidth=2.0)
         ax.plot(t.goal_lon_deg, t.goal_lat_deg, linestyle="none", marker="*", markersize=16,
                 markerfacecolor=GOAL_COLOR, markeredgecolor="black", markeredgewidth=1.0, zorder=9)
     handles.append(mpl.lines.Line2D([], [], linestyle="none", marker="*", markersize=13, markerfacecolor=GOAL_COLOR,
@@ -424,7 +421,7 @@ def _plot_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: 
     if (~table.water[0][in_view]).any():
         handles.append(mpl.patches.Patch(facecolor=LAND_COLOR, edgecolor="0.5", label="land (policy table)"))
 
-    _geo_axes(mpl, ax, grid)
+    geo_axes(mpl, ax, grid)
     ax.set_xlim(extent[0], extent[1])
     ax.set_ylim(extent[2], extent[3])
     fig.legend(handles=handles, loc="outside lower center", ncols=3, frameon=False, fontsize=8.5)
@@ -432,7 +429,7 @@ def _plot_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: 
     over = (f"over the {plan.grid.depth_m[0]:g} m currents of the planning forecast" if plan is not None
             else "over land from the policy table (no forecast given)")
     ax.set_title(f"{dive.log.path.name}: track coloured by the action decided, {hours:.1f} h\n{over}", fontsize=11)
-    _save(fig, path)
+    save_png(fig, path)
     caption = "The track, coloured by the action the executive decided"
     caption += ", over the planning forecast's surface currents" if plan is not None else ", over land from the policy table"
     if nominal is not None:
@@ -450,7 +447,7 @@ def _map_extent(grid: Grid, lon: NDArray[np.float64], lat: NDArray[np.float64], 
     The map shows where the dive went rather than the whole planning region; it
     is at least 8 cells across each way so that the currents around stay readable.
     """
-    lon_e, lat_e = _edges(grid)
+    lon_e, lat_e = cell_edges(grid)
     dx, dy = grid.dlon_deg, grid.dlat_deg
     x0, x1 = _span(float(lon.min()), float(lon.max()), margin_cells * dx, 8 * dx)
     y0, y1 = _span(float(lat.min()), float(lat.max()), margin_cells * dy, 8 * dy)
@@ -488,7 +485,7 @@ def _draw_currents(mpl: Any, ax: Any, plan: PlanResult, extent: tuple[float, flo
     # Arrow lengths: the 98th percentile speed (of the whole layer) spans 0.9 of the arrow spacing, the fastest 1.5.
     v98 = float(np.nanpercentile(speed, 98))
     vmax = float(np.nanmax(speed))
-    cell_x = min(grid.dlon_deg, grid.dlat_deg / _cos_lat(grid))
+    cell_x = min(grid.dlon_deg, grid.dlat_deg / cos_lat(grid))
     scale = max(v98 / (0.9 * stride * cell_x), vmax / (1.5 * stride * cell_x), 1e-12)
     shaft = float(np.clip(0.06 / math.ceil(cols.size / stride), 0.0018, 0.0035))  # fraction of the axes width
     return ax.quiver(x[ok], y[ok], us[ok], vs[ok], color=FLOW_ARROW_COLOR, angles="uv", scale_units="x", scale=scale,
@@ -512,8 +509,8 @@ def _plot_timeseries(dive: Dive, path: Path) -> str:
     n = len(track)
     t_h = track.time_s / 3600.0
     rows = _thin(n, MAX_SERIES_POINTS)
-    mpl = _matplotlib()
-    fig = _figure(mpl, 9.5, 8.6)
+    mpl = load_matplotlib()
+    fig = new_figure(mpl, 9.5, 8.6)
     ax_depth, ax_head, ax_act, ax_energy = fig.subplots(4, 1, sharex=True, height_ratios=[1.1, 1.0, 0.9, 1.0])
 
     ax_depth.plot(t_h[rows], track.depth_m[rows], color="#0072b2", linewidth=1.2)
@@ -560,7 +557,7 @@ def _plot_timeseries(dive: Dive, path: Path) -> str:
     if start is not None and math.isfinite(start):
         when = ", first decision at " + str(np.datetime64(int(round(start)), "s")).replace("T", " ") + " UTC"
     fig.suptitle(f"{dive.log.path.name}: {n:,} decisions{when}", fontsize=12)
-    _save(fig, path)
+    save_png(fig, path)
     return "Depth, heading, the action decided and the energy used, against vehicle time."
 
 
@@ -597,8 +594,8 @@ def _plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: b
     pick = _thin(len(track), MAX_SERIES_POINTS)
     t_h = track.time_s[pick] / 3600.0
     energy = track.energy_used_wh
-    mpl = _matplotlib()
-    fig = _figure(mpl, 9.5, 4.8)
+    mpl = load_matplotlib()
+    fig = new_figure(mpl, 9.5, 4.8)
     ax = fig.subplots()
     gaps = "no table state or unreachable" if whole else "another table, no table state or unreachable"
     line_cost, = ax.plot(t_h, cost[pick], color="#0072b2", linewidth=1.5, drawstyle="steps-post",
@@ -622,7 +619,7 @@ def _plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: b
     fig.legend(handles=[line_cost, line_energy], loc="outside lower center", ncols=2, frameon=False, fontsize=8.5)
     ax.set_title(f"{dive.log.path.name}: predicted cost-to-go along the track and the energy spent\n"
                  f"plan {plan.table.crc32:08x} ({_plan_label(plan)})", fontsize=11)
-    _save(fig, path)
+    save_png(fig, path)
     what = "energy still to spend, in Wh" if physical else "cost-to-go"
     caption = (f"The plan's predicted {what}, of the state at each decision (it falls to 0 at the goal),"
                " and the energy the battery reports used")
