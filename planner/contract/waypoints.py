@@ -63,8 +63,10 @@ class MavFrame(IntEnum):
 
 GOAL_FRAMES = frozenset({MavFrame.GLOBAL_RELATIVE_ALT, MavFrame.GLOBAL_RELATIVE_ALT_INT})
 # _INT frames (degE7 in MISSION_ITEM_INT) and their float twins (degrees in MISSION_ITEM and WPL files).
-_FLOAT_FRAME: dict[int, int] = {MavFrame.GLOBAL_INT: MavFrame.GLOBAL, MavFrame.GLOBAL_RELATIVE_ALT_INT: MavFrame.GLOBAL_RELATIVE_ALT,
-                MavFrame.GLOBAL_TERRAIN_ALT_INT: MavFrame.GLOBAL_TERRAIN_ALT}
+_FLOAT_FRAME: dict[int, int] = {
+    MavFrame.GLOBAL_INT: MavFrame.GLOBAL, MavFrame.GLOBAL_RELATIVE_ALT_INT: MavFrame.GLOBAL_RELATIVE_ALT,
+    MavFrame.GLOBAL_TERRAIN_ALT_INT: MavFrame.GLOBAL_TERRAIN_ALT,
+}
 
 
 @unique

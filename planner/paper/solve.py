@@ -395,9 +395,10 @@ class _BucketQueue:
 
 @numba.njit(cache=True, nogil=True)
 def _search(  # pragma: no cover
-    L: int, ny: int, nx: int, masks: NDArray[np.uint64], remaining: NDArray[np.uint8], costs: NDArray[np.int64], robust: bool,
-    packed: NDArray[np.int64], action: NDArray[np.uint8], bucket_state: NDArray[np.int32], count: NDArray[np.int64],
-    cand_state: NDArray[np.int64], cand_key: NDArray[np.int64], fifo_state: NDArray[np.int64], fifo_key: NDArray[np.int64], ctr: NDArray[np.int64], budget: int,
+    L: int, ny: int, nx: int, masks: NDArray[np.uint64], remaining: NDArray[np.uint8], costs: NDArray[np.int64],
+    robust: bool, packed: NDArray[np.int64], action: NDArray[np.uint8], bucket_state: NDArray[np.int32],
+    count: NDArray[np.int64], cand_state: NDArray[np.int64], cand_key: NDArray[np.int64], fifo_state: NDArray[np.int64],
+    fifo_key: NDArray[np.int64], ctr: NDArray[np.int64], budget: int,
 ) -> int:
     """Settle states in value order until done, ``budget`` more are settled, or a buffer is full.
 

@@ -301,9 +301,13 @@ def build_physical(
 
 # --------------------------------------------------------------------------- compiled kernels
 
+# Shorthands for the kernels' array arguments.
+_F64 = NDArray[np.float64]
+_Mask = NDArray[np.bool_]
+
 
 @numba.njit(cache=True, nogil=True)
-def _interp(f: NDArray[np.float64], l: int, X: float, Y: float) -> float:  # pragma: no cover - compiled
+def _interp(f: _F64, l: int, X: float, Y: float) -> float:  # pragma: no cover - compiled
     """Bilinear value of layer ``l`` at fine-grid index point (X, Y), clamped to the grid; NaN when a
     node with non-zero weight is land."""
     nyf, nxf = f.shape[1], f.shape[2]
@@ -328,7 +332,7 @@ def _interp(f: NDArray[np.float64], l: int, X: float, Y: float) -> float:  # pra
 
 @numba.njit(cache=True, nogil=True)
 def _velocity(  # pragma: no cover
-    uf: NDArray[np.float64], vf: NDArray[np.float64], refine: int, la: int, lb: int, wb: float, x: float, y: float,
+    uf: _F64, vf: _F64, refine: int, la: int, lb: int, wb: float, x: float, y: float,
     lat0: float, dlat: float, dlon_rad: float, dy_m: float, we: float, wn: float,
 ) -> tuple[float, float]:
     """(dx/dt, dy/dt) in planning cells per second at planning-index point (x, y); NaN on land.
@@ -349,8 +353,9 @@ def _velocity(  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True)
 def _run(  # pragma: no cover
-    uf: NDArray[np.float64], vf: NDArray[np.float64], goal: NDArray[np.bool_], refine: int, la: int, lb: int, glide_s: float, x0: float, y0: float,
-    we: float, wn: float, t_max: float, h: float, lat0: float, dlat: float, dlon_rad: float, dy_m: float, nx: int, ny: int,
+    uf: _F64, vf: _F64, goal: _Mask, refine: int, la: int, lb: int, glide_s: float, x0: float, y0: float,
+    we: float, wn: float, t_max: float, h: float, lat0: float, dlat: float, dlon_rad: float, dy_m: float,
+    nx: int, ny: int,
 ) -> tuple[bool, float, float, float]:
     """Integrate one sample with RK4. Returns (ok, x, y, t).
 
@@ -417,9 +422,10 @@ def _nearest(x: float) -> int:  # pragma: no cover
 
 @numba.njit(cache=True, parallel=True)
 def _sample_cells(  # pragma: no cover
-    uf: NDArray[np.float64], vf: NDArray[np.float64], water: NDArray[np.bool_], goal: NDArray[np.bool_], refine: int, lat0: float, dlat: float, dlon_rad: float, dy_m: float,
-    depth_m: NDArray[np.float64], course_rad: NDArray[np.float64], offsets: NDArray[np.float64], members: NDArray[np.float64], speed: float, glide_rate: float, t_max: float,
-    rk4_steps: int, powers: NDArray[np.float64], count: NDArray[np.int32], emax: NDArray[np.float64], esum: NDArray[np.float64], tsum: NDArray[np.float64], hazard: NDArray[np.bool_],
+    uf: _F64, vf: _F64, water: _Mask, goal: _Mask, refine: int, lat0: float, dlat: float, dlon_rad: float,
+    dy_m: float, depth_m: _F64, course_rad: _F64, offsets: _F64, members: _F64, speed: float, glide_rate: float,
+    t_max: float, rk4_steps: int, powers: _F64,
+    count: NDArray[np.int32], emax: _F64, esum: _F64, tsum: _F64, hazard: _Mask,
 ) -> None:
     L, ny, nx = water.shape
     n_off = offsets.shape[0]
@@ -514,9 +520,9 @@ _PAIR_ACTIONS = np.array([0, 1, 2, 3, 4, 5, 8, 9], dtype=np.int64)
 
 @numba.njit(cache=True)
 def _pairs(  # pragma: no cover
-    count: NDArray[np.int32], emax: NDArray[np.float64], esum: NDArray[np.float64], tsum: NDArray[np.float64], hazard: NDArray[np.bool_], water: NDArray[np.bool_], rot_wh: NDArray[np.float64], rot_s: float,
-    n_samples: int,
-) -> tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    count: NDArray[np.int32], emax: _F64, esum: _F64, tsum: _F64, hazard: _Mask, water: _Mask, rot_wh: _F64,
+    rot_s: float, n_samples: int,
+) -> tuple[NDArray[np.int64], NDArray[np.int8], NDArray[np.int64], NDArray[np.int64], _F64, _F64, _F64, _F64]:
     """Flatten the per-cell samples into per-(state, action) outcome lists, states in index order."""
     L, ny, nx = water.shape
     n_states = 8 * L * ny * nx

@@ -138,11 +138,15 @@ def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
 
 # --------------------------------------------------------------------------- robust
 
+# Shorthands for the kernels' array arguments.
+_F64 = NDArray[np.float64]
+_I64 = NDArray[np.int64]
+
 
 @numba.njit(cache=True)
 def _robust(  # pragma: no cover
-    ptr: NDArray[np.int64], out_state: NDArray[np.int64], out_emax: NDArray[np.float64], pair_state: NDArray[np.int64], duration: NDArray[np.float64], goal_states: NDArray[np.int64], n_states: int,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    ptr: _I64, out_state: _I64, out_emax: _F64, pair_state: _I64, duration: _F64, goal_states: _I64, n_states: int,
+) -> tuple[_F64, _F64, _I64]:
     n_pairs = pair_state.size
     remaining = np.zeros(n_pairs, dtype=np.int64)
     rev_count = np.zeros(n_states + 1, dtype=np.int64)
@@ -207,12 +211,12 @@ def _robust(  # pragma: no cover
 
 
 @numba.njit(cache=True, inline="always")
-def _less(hk: NDArray[np.float64], hv: NDArray[np.int64], a: int, b: int) -> bool:  # pragma: no cover
+def _less(hk: _F64, hv: _I64, a: int, b: int) -> bool:  # pragma: no cover
     return hk[a] < hk[b] or (hk[a] == hk[b] and hv[a] < hv[b])
 
 
 @numba.njit(cache=True)
-def _push(hk: NDArray[np.float64], hv: NDArray[np.int64], n: int, key: float, item: int) -> int:  # pragma: no cover
+def _push(hk: _F64, hv: _I64, n: int, key: float, item: int) -> int:  # pragma: no cover
     hk[n] = key
     hv[n] = item
     c = n
@@ -228,7 +232,7 @@ def _push(hk: NDArray[np.float64], hv: NDArray[np.int64], n: int, key: float, it
 
 
 @numba.njit(cache=True)
-def _pop(hk: NDArray[np.float64], hv: NDArray[np.int64], n: int) -> int:  # pragma: no cover
+def _pop(hk: _F64, hv: _I64, n: int) -> int:  # pragma: no cover
     n -= 1
     hk[0] = hk[n]
     hv[0] = hv[n]
@@ -332,8 +336,8 @@ def _best_pairs(q: NDArray, pair_state: NDArray, n: int) -> NDArray[np.int64]:
 
 @numba.njit(cache=True)
 def _proper_start(  # pragma: no cover
-    ptr: NDArray[np.int64], out_state: NDArray[np.int64], pair_state: NDArray[np.int64], is_goal: NDArray[np.bool_], n_states: int,
-) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    ptr: _I64, out_state: _I64, pair_state: _I64, is_goal: NDArray[np.bool_], n_states: int,
+) -> tuple[_I64, NDArray[np.bool_]]:
     """States that reach the goal with probability 1 under some policy, and a proper policy there.
 
     Repeat: a pair is usable when all its outcomes are alive; a backward search from the goal over
