@@ -19,7 +19,8 @@ from planner.contract.errors import ExecutiveError
 from planner.contract.table import PolicyTable, read_table_file
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``exec`` and ``log`` (one module runs both)."""
     ex = sub.add_parser("exec", help="run the onboard executive against a vehicle over MAVLink")
     ex.add_argument("--table", type=Path, action="append",
                     help="policy table (.lrpt) from `lrauv plan`; repeat for the goals of a multi-goal mission")
