@@ -26,7 +26,8 @@ if TYPE_CHECKING:  # at run time imported where used, as below
     from planner.contract.settings import OnArrival
 
 
-def add_parsers(sub: Subcommands) -> None:
+def add_parser(sub: Subcommands) -> None:
+    """Register ``exec`` and ``log`` (one module runs both)."""
     ex = sub.add_parser("exec", help="run the onboard executive against a vehicle over MAVLink")
     ex.add_argument("--table", type=Path, action="append",
                     help="policy table (.lrpt) from `lrauv plan`; repeat for the goals of a multi-goal mission")

@@ -123,10 +123,3 @@ def chunks(n: int, workers: int, *, per_worker: int = 4) -> list[range]:
     size = math.ceil(n / pieces)
     return [range(i, min(i + size, n)) for i in range(0, n, size)]
 
-
-def add_arguments(parser: Any) -> None:
-    """``--scheduler`` and ``--workers``, for every command with parallel work."""
-    parser.add_argument("--scheduler", metavar="ADDRESS",
-                        help=f"Dask scheduler to run the work on (tcp://HOST:PORT); {IN_PROCESS}: no Dask, "
-                             "one task after another here; default: a local Dask cluster, one worker per core")
-    parser.add_argument("--workers", type=int, help="workers of the local cluster (default: one per core)")

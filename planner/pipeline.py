@@ -7,14 +7,14 @@ import io
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 from numpy.typing import NDArray
 
-from planner.cluster import InProcess, Runner
+from planner.cluster import InProcess, Runner, open_runner
 from planner.contract.errors import ForecastError, GridError, PlannerError
 from planner.forecast import (
     Forecast,
@@ -296,6 +296,21 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     )
 
 
+def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, workers: int | None = None,
+                        progress: bool = False) -> PlanResult:
+    """``make_plan``, several forecast members sampled where ``scheduler`` says (``planner.cluster.open_runner``).
+
+    One member plans here without a runner; the file headers are read once, here.
+    """
+    refs = members_of(request)
+    request = replace(request, members=tuple(refs))
+    if len(refs) == 1:
+        return make_plan(request, progress=progress)
+    with open_runner(scheduler, workers=workers) as runner:
+        _note(progress, f"{len(refs)} forecast members, sampled: {runner.describe()}")
+        return make_plan(request, progress=progress, runner=runner)
+
+
 def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runner, progress: bool) -> PlanResult:
     if request.settings.model != "physical":
         raise PlannerError(f"an ensemble of {len(refs)} forecast members needs the physical model (members are its "
@@ -362,6 +377,27 @@ def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:
         arrays["time_s"] = np.ascontiguousarray(sol.time_s)
     np.savez_compressed(buf, **arrays)
     return write_atomic(path, buf.getvalue())
+
+
+def mission_forecast(mission: Mission, *, out_dir: Path) -> Path:
+    """The forecast file a mission names: its file, the newest file in its directory, or a generated one.
+
+    A generated (synthetic) forecast is written to ``out_dir`` once and reused after.
+    """
+    src = mission.forecast
+    if src.file is not None:
+        return src.file
+    if src.directory is not None:
+        files = sorted(src.directory.glob("*.nc"), key=lambda p: (p.stat().st_mtime, p.name))
+        if not files:
+            raise PlannerError(f"{mission.path}: forecast.directory {src.directory} holds no .nc files")
+        return files[-1]
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
+
+    path = out_dir / f"synthetic_seed{src.synthetic_seed}_{src.synthetic_hours}h.nc"
+    if not path.exists():
+        write_synthetic(path, SyntheticSettings(seed=src.synthetic_seed, hours=src.synthetic_hours))
+    return path
 
 
 def _note(progress: bool, text: str) -> None:

@@ -138,3 +138,21 @@ def test_negative_longitudes_as_separate_arguments(synthetic_forecast, tmp_path)
                "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     assert out.is_file()
+
+
+def test_the_subcommand_table_lists_what_the_modules_register():
+    import argparse
+
+    from planner.cli import TABLE, build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(sub.choices) == [c.name for c in TABLE]
+    assert {a.dest: a.help for a in sub._choices_actions} == {c.name: c.help for c in TABLE}
+
+
+def test_only_the_named_subcommand_module_is_imported():
+    probe = ("import sys\nfrom planner.cli import main\n"
+             "try:\n    main(['exec', '--help'])\nexcept SystemExit:\n    pass\n"
+             "print('loaded:', ','.join(sorted(m for m in sys.modules if m.startswith(('planner.cli.', 'vehicle_sim', 'planner.shore')))))")
+    proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=REPO, check=True)
+    assert proc.stdout.splitlines()[-1] == "loaded: ", proc.stdout

@@ -17,11 +17,11 @@ import pytest
 import xarray as xr
 
 from planner.cli import build_parser
+from planner.cli.forecast import settings_from_args
 from planner.forecast.synthetic.double_gyre import (
     DoubleGyreSettings,
     box_size_m,
     gyre_velocity,
-    settings_from_args,
     synthesize_gyre,
     write_gyre,
 )

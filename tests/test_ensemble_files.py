@@ -22,10 +22,10 @@ from planner.forecast.synthetic.ensemble import (
     MEMBER_DIM,
     gyre_ensemble,
     scb_ensemble,
-    write_ensemble_from_args,
     write_gyre_ensemble,
     write_scb_ensemble,
 )
+from planner.cli.forecast import write_ensemble_from_args
 from planner.contract.errors import LrauvError
 from planner.forecast import open_forecast
 from planner.forecast.synthetic.scb import SyntheticSettings, _forecast_scene, synthesize, write_synthetic

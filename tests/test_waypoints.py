@@ -30,7 +30,8 @@ from planner.contract.waypoints import (  # noqa: E402
     wpl_frame,
     write_wpl,
 )
-from planner.cli.waypoints import add_parser, replace_goals, run  # noqa: E402
+from planner.cli.waypoints import add_parser, run  # noqa: E402
+from planner.shore.waypoints import replace_goals  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "missions" / "demo.yaml"

@@ -12,8 +12,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from planner.cli.cluster_options import add_cluster_arguments
 from planner.contract.atomic import write_atomic
-from planner.cluster import add_arguments as add_cluster_arguments
 from planner.contract.errors import LrauvError
 from planner.shore.evaluation.runs import METHODS, OUTCOMES, MethodSummary, RunResult, summarise
 
@@ -42,10 +42,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-ar
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from planner.shore.evaluation.campaign import CampaignSpec, prepare, resolution_change, run_all
     from planner.cluster import open_runner
-    from planner.cli import _mission_forecast
     from planner.contract.mission import load_mission
+    from planner.pipeline import mission_forecast
+    from planner.shore.evaluation.campaign import CampaignSpec, prepare, resolution_change, run_all
     from vehicle_sim.world import WorldError, load_truth
 
     mission = load_mission(args.mission)
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         vehicle = replace(vehicle, cruise_speed_m_s=args.cruise_speed,
                           max_speed_m_s=max(vehicle.max_speed_m_s, args.cruise_speed))
         mission = replace(mission, settings=replace(mission.settings, vehicle=vehicle))
-    forecast = args.forecast or _mission_forecast(mission, out_dir=args.out or Path("."))
+    forecast = args.forecast or mission_forecast(mission, out_dir=args.out or Path("."))
     try:
         truth = load_truth(args.truth)
     except WorldError as exc:

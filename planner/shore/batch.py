@@ -14,15 +14,12 @@ must be readable where the workers run (a shared filesystem for a remote cluster
 
 from __future__ import annotations
 
-import argparse
-import os
-import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from planner.contract.atomic import write_atomic
-from planner.cluster import add_arguments as add_cluster_arguments
 from planner.contract.errors import LrauvError, MissionError, ShoreError
 
 MAX_FLEET_BYTES = 1 << 20
@@ -34,7 +31,7 @@ class BatchItem:
 
     vehicle: str
     goal_index: int
-    request: object  # planner.pipeline.PlanRequest (imported lazily: building the parser stays light)
+    request: object  # planner.pipeline.PlanRequest (imported where used: this module loads no numpy)
     out: Path
 
 
@@ -47,15 +44,6 @@ class BatchResult:
     water_states: int
     plan_s: float
     error: str | None = None
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser("batch", help="plan every goal of many missions (or a fleet file) as parallel tasks")
-    p.add_argument("files", type=Path, nargs="+", help="mission YAML files and/or fleet YAML files")
-    p.add_argument("--forecast", type=Path, help="plan every mission on this forecast (default: each mission's)")
-    p.add_argument("--out", type=Path, required=True, help="directory for OUT/<vehicle>/goal-<n>.lrpt")
-    add_cluster_arguments(p)
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def load_fleet(path: Path) -> list[tuple[str, Path]]:
@@ -105,9 +93,8 @@ def is_fleet(path: Path) -> bool:
 
 def collect(files: list[Path], out_dir: Path, forecast: Path | None) -> list[BatchItem]:
     """Every goal of every mission named directly or through a fleet file."""
-    from planner.cli import _mission_forecast
     from planner.contract.mission import load_mission
-    from planner.pipeline import PlanRequest
+    from planner.pipeline import PlanRequest, mission_forecast
 
     vehicles: list[tuple[str, Path]] = []
     for f in files:
@@ -119,7 +106,7 @@ def collect(files: list[Path], out_dir: Path, forecast: Path | None) -> list[Bat
     items = []
     for vehicle, path in vehicles:
         mission = load_mission(path)
-        fc = forecast or _mission_forecast(mission, out_dir=out_dir)
+        fc = forecast or mission_forecast(mission, out_dir=out_dir)
         for g in range(len(mission.goals)):
             request = PlanRequest.for_mission(mission, fc, goal_index=g)
             items.append(BatchItem(vehicle=vehicle, goal_index=g, request=request,
@@ -144,27 +131,30 @@ def plan_item(item: BatchItem) -> BatchResult:
     )
 
 
-def run(args: argparse.Namespace) -> int:
+@dataclass(frozen=True, kw_only=True)
+class BatchRun:
+    """Every goal's result, in the order collected; ``written[n]`` is item n's table file (None: it failed)."""
+
+    items: tuple[BatchItem, ...]
+    results: tuple[BatchResult, ...]
+    written: tuple[Path | None, ...]
+    elapsed_s: float
+
+    @property
+    def failed(self) -> int:
+        return sum(1 for r in self.results if r.error is not None)
+
+
+def run_batch(files: Sequence[Path], *, out_dir: Path, forecast: Path | None = None, scheduler: str | None = None,
+              workers: int | None = None, note: Callable[[str], None] | None = None) -> BatchRun:
+    """Plan every goal of ``files`` (missions, fleets) as tasks of the runner; write each table under ``out_dir``."""
     from planner.cluster import open_runner
 
-    items = collect(list(args.files), args.out, args.forecast)
+    items = collect(list(files), out_dir, forecast)
     t0 = time.perf_counter()
-    with open_runner(args.scheduler, workers=args.workers) as runner:
-        if not args.quiet:
-            print(f"  {len(items)} goals, {runner.describe()}", file=sys.stderr, flush=True)
+    with open_runner(scheduler, workers=workers) as runner:
+        if note is not None:
+            note(f"{len(items)} goals, {runner.describe()}")
         results = runner.map(plan_item, items)
-    failed = 0
-    for item, r in zip(items, results):
-        if r.error is not None:
-            failed += 1
-            print(f"failed     {r.vehicle} goal {r.goal_index}: {r.error}")
-            continue
-        assert r.table is not None
-        path = write_atomic(item.out, r.table)
-        print(f"table      {os.fspath(path)}  ({len(r.table):,} bytes; reachable {r.reachable:,} of "
-              f"{r.water_states:,} water states; {r.plan_s:.2f} s)")
-    print(f"batch      {len(items) - failed} of {len(items)} goals planned in {time.perf_counter() - t0:.1f} s")
-    if failed:
-        raise ShoreError(f"batch: {failed} of {len(items)} goals could not be planned (listed above)")
-    return 0
-
+    written = tuple(None if r.table is None else write_atomic(item.out, r.table) for item, r in zip(items, results))
+    return BatchRun(items=tuple(items), results=tuple(results), written=written, elapsed_s=time.perf_counter() - t0)

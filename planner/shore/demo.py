@@ -9,7 +9,6 @@ where everything is. Both processes are always stopped, also on errors.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import subprocess
 import sys
@@ -27,34 +26,6 @@ class DemoResult:
     track_csv: Path
     log_path: Path
     wall_s: float
-
-
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser("demo", help="run the simulated vehicle and the executive over UDP to the goal")
-    p.add_argument("--table", type=Path, required=True, help="policy table from `lrauv plan`")
-    p.add_argument("--mission", type=Path, required=True, help="mission YAML (vehicle, safety, goal)")
-    p.add_argument("--truth", type=Path, required=True, help="forecast the simulator uses as the true currents")
-    p.add_argument("--start", required=True, help="LON,LAT of the vehicle at the start")
-    p.add_argument("--depth-m", type=float, default=0.0)
-    p.add_argument("--heading-deg", type=float, default=0.0)
-    p.add_argument("--speedup", type=float, default=1000.0, help="simulator speedup over real time (default 1000)")
-    p.add_argument("--out", type=Path, default=Path("out/demo"), help="directory for the log, track and pictures")
-    p.add_argument("--timeout-s", type=float, default=170.0, help="wall-time limit for the run")
-    p.add_argument("--seed", type=int, default=0)
-
-
-def run(args: argparse.Namespace) -> int:
-    args.out.mkdir(parents=True, exist_ok=True)
-    result = run_closed_loop(
-        table=args.table, mission=args.mission, truth=args.truth, start=args.start, depth_m=args.depth_m,
-        heading_deg=args.heading_deg, speedup=args.speedup, out=args.out, timeout_s=args.timeout_s, seed=args.seed,
-    )
-    sys.stdout.write(result.exec_output)
-    picture = _plot(args.table, result.track_csv, args.out / "pictures" / "track.png")
-    print(f"track      {result.track_csv}")
-    print(f"picture    {picture}")
-    print(f"demo       {result.wall_s:.1f} s wall in all")
-    return result.exec_status
 
 
 def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: str, depth_m: float, heading_deg: float,
@@ -108,9 +79,10 @@ def read_track(path: Path) -> dict[str, list[float]]:
     return cols
 
 
-def _plot(table_path: Path, track_csv: Path, out: Path) -> Path:
-    from planner.shore.plots import plot_track
+def draw_track(table_path: Path, track_csv: Path, out: Path) -> Path:
+    """The simulator's track over the table's region, as a PNG at ``out``."""
     from planner.contract.table import PolicyTable
+    from planner.shore.plots import plot_track
 
     table = PolicyTable.load(table_path)
     track = read_track(track_csv)

@@ -17,63 +17,53 @@ and the error then says which of the two it saw (pymavlink's signing counters).
 
 from __future__ import annotations
 
-import argparse
-import contextlib
-import io
-import sys
 import tempfile
+import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from planner.contract.errors import ShoreError
+from planner.contract.errors import LrauvError, ShoreError
 
 GCS_SYSTEM, GCS_COMPONENT = 255, 190  # a ground station's usual MAVLink identity (MAVProxy, QGC)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    up = sub.add_parser("upload", help="upload a mission's goals and tables to a running executive over MAVLink")
-    up.add_argument("mission", type=Path, help="mission YAML")
-    up.add_argument("--to", required=True, metavar="ADDRESS",
-                    help="pymavlink address of the executive's ground-station link, e.g. udpout:127.0.0.1:14551")
-    up.add_argument("--table", type=Path, action="append", default=[],
-                    help="a ready policy table for one of the goals (repeatable); other goals are planned here")
-    up.add_argument("--forecast", type=Path, help="forecast to plan on (default: the mission's source)")
-    up.add_argument("--target-system", type=int, help="the executive's MAVLink system (default 1)")
-    up.add_argument("--target-component", type=int, help="the executive's MAVLink component (default 191)")
-    up.add_argument("--timeout-s", type=float, default=5.0, help="MAVLink FTP: seconds to wait for each reply before resending (default 5)")
-    up.add_argument("--signing-key-file", type=Path, metavar="KEY",
-                    help="MAVLink 2 signing key (32 bytes, or 64 hex digits) to sign with"
-                         " (default: the mission's signing section; docs/missions.md)")
-    up.add_argument("--quiet", action="store_true")
+def upload_mission(mission_path: Path, *, to: str, tables: Sequence[Path] = (), forecast: Path | None = None,
+                   target_system: int | None = None, target_component: int | None = None, timeout_s: float = 5.0,
+                   signing_key_file: Path | None = None, say: Callable[[str], None] | None = None,
+                   report: Callable[[str], None] | None = None) -> None:
+    """Send the mission's goals and a table for each goal to the executive at ``to``; refusals raise LrauvError.
 
-
-def run(args: argparse.Namespace) -> int:
+    ``tables``: ready tables (each must serve a goal); the other goals are planned here on
+    ``forecast`` (default: the mission's). ``say`` gets progress lines, ``report`` the summary of
+    each plan made here (``lrauv plan``'s lines); None: silent.
+    """
     from executive import goal_tables
-    from planner.shore.ftp_client import FtpTimeoutError
     from planner.contract.mission import load_mission
-    from planner.shore.mission_client import MissionTransferError
     from planner.contract.table import PolicyTable, read_table_file
+    from planner.shore.ftp_client import FtpTimeoutError
+    from planner.shore.mission_client import MissionTransferError
 
-    mission = load_mission(args.mission)
-    key, link_id = _signing(args, mission)
-    files = {str(path): read_table_file(path) for path in args.table}
-    tables = {name: PolicyTable.from_bytes(data, name=name) for name, data in files.items()}
-    plan = goal_tables.assign(mission.goals, tables.items(), str(args.mission))
-    names = {id(table): name for name, table in tables.items()}
+    say = say or _silent
+    mission = load_mission(mission_path)
+    key, link_id = _signing(signing_key_file, mission)
+    files = {str(path): read_table_file(path) for path in tables}
+    ready = {name: PolicyTable.from_bytes(data, name=name) for name, data in files.items()}
+    plan = goal_tables.assign(mission.goals, ready.items(), str(mission_path))
+    names = {id(table): name for name, table in ready.items()}
     blobs = {n: files[names[id(t)]] for n, t in enumerate(plan.tables) if t is not None}
-    say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     with tempfile.TemporaryDirectory(prefix="lrauv-upload-") as tmp:
         for n, goal in enumerate(mission.goals):
             if n not in blobs:
                 say(f"planning goal {n} on shore")
-                with contextlib.redirect_stdout(io.StringIO()) if args.quiet else contextlib.nullcontext():
-                    blobs[n] = _plan_goal(args.mission, goal.goal, args.forecast, Path(tmp) / f"goal-{n}.lrpt")
-        conn = _connect(args.to)
+                blobs[n] = _plan_goal(mission, n, forecast, Path(tmp) / f"goal-{n}.lrpt", report or _silent)
+        conn = _connect(to)
         try:
             if key is not None:
                 _sign(conn, key, link_id)
                 say(f"signing with key {key.fingerprint}, link id {link_id}")
             try:
-                _send(conn, mission, blobs, args, say)
+                _send(conn, mission, blobs, target_system=target_system, target_component=target_component,
+                      timeout_s=timeout_s, say=say)
             except (MissionTransferError, FtpTimeoutError) as exc:  # no answer: say what signing may have to do with it
                 diagnosis = _signing_diagnosis(conn, signed=key is not None)
                 if (isinstance(exc, MissionTransferError) and exc.result is not None) or not diagnosis:
@@ -81,17 +71,20 @@ def run(args: argparse.Namespace) -> int:
                 raise type(exc)(f"{exc}; {diagnosis}") from None
         finally:
             conn.close()
-    return 0
 
 
-def _signing(args: argparse.Namespace, mission):  # type: ignore[no-untyped-def]
-    """The key to sign with (``--signing-key-file`` first, then the mission's) and the link id, or (None, 0)."""
+def _silent(_text: str) -> None:
+    pass
+
+
+def _signing(signing_key_file: Path | None, mission):  # type: ignore[no-untyped-def]
+    """The key to sign with (``signing_key_file`` first, then the mission's) and the link id, or (None, 0)."""
     from executive.signing import load_key
 
     sg = mission.signing
     link_id = sg.link_id if sg is not None else 0
-    if args.signing_key_file is not None:
-        return load_key(key_file=args.signing_key_file, where="--signing-key-file"), link_id
+    if signing_key_file is not None:
+        return load_key(key_file=signing_key_file, where="--signing-key-file"), link_id
     if sg is None:
         return None, 0
     return load_key(key_file=sg.key_file, passphrase_env=sg.passphrase_env, where=sg.where), link_id
@@ -121,16 +114,31 @@ def _signing_diagnosis(conn, *, signed: bool) -> str:  # type: ignore[no-untyped
             " behind the vehicle's? (see its log)")
 
 
-def _plan_goal(mission_path: Path, goal, forecast: Path | None, out: Path) -> bytes:  # type: ignore[no-untyped-def]
-    from planner.cli import main as lrauv
+def _plan_goal(mission, n: int, forecast: Path | None, out: Path, report: Callable[[str], None]) -> bytes:  # type: ignore[no-untyped-def]
+    """Plan goal ``n`` as ``lrauv plan MISSION --goal ... --forecast ...`` would, write the table to ``out``."""
+    from dataclasses import replace
 
-    argv = ["plan", str(mission_path), "--quiet", f"--out={out}", f"--goal={goal.lon_deg!r},{goal.lat_deg!r},{goal.depth_m!r}",
-            f"--goal-radius={goal.radius_cells}"]
-    if forecast is not None:
-        argv.append(f"--forecast={forecast}")
-    if lrauv(argv) != 0:
-        raise ShoreError(f"{mission_path}: planning goal ({goal.lon_deg:g}, {goal.lat_deg:g}) failed (see above)")
-    return out.read_bytes()
+    from planner.contract.atomic import write_atomic
+    from planner.pipeline import PlanRequest, mission_forecast, plan_with_scheduler
+    from planner.plan_summary import summary_lines, time_line
+
+    goal = mission.goals[n].goal
+    try:
+        if forecast is None:
+            request = PlanRequest.for_mission(mission, mission_forecast(mission, out_dir=out.parent), goal_index=n)
+        else:  # the given forecast replaces the mission's whole forecast section: its step and variables too
+            request = replace(PlanRequest.for_mission(mission, forecast, goal_index=n),
+                              time_index=None, time_iso=None, variables=None, grid_file=None)
+        t0 = time.perf_counter()
+        result = plan_with_scheduler(request)
+    except LrauvError as exc:
+        raise ShoreError(f"{mission.path}: planning goal ({goal.lon_deg:g}, {goal.lat_deg:g}) failed: {exc}") from None
+    data = result.table.to_bytes()
+    write_atomic(out, data)
+    for line in summary_lines(result, out=out, size=len(data)):
+        report(line)
+    report(time_line(result, time.perf_counter() - t0))
+    return data
 
 
 def _connect(address: str):  # type: ignore[no-untyped-def]
@@ -142,19 +150,20 @@ def _connect(address: str):  # type: ignore[no-untyped-def]
         raise ShoreError(f"--to {address}: cannot open: {exc}") from None
 
 
-def _send(conn, mission, blobs: dict[int, bytes], args: argparse.Namespace, say) -> None:  # type: ignore[no-untyped-def]
+def _send(conn, mission, blobs: dict[int, bytes], *, target_system: int | None, target_component: int | None,  # type: ignore[no-untyped-def]
+          timeout_s: float, say: Callable[[str], None]) -> None:
     from executive.mavlink_bridge import EXECUTIVE_COMPONENT, EXECUTIVE_SYSTEM
+    from planner.contract.mission import goals_to_items
     from planner.shore.ftp_client import put_file
     from planner.shore.mission_client import upload_goals
-    from planner.contract.mission import goals_to_items
 
     first = mission.goals[0].goal
     items = goals_to_items(mission.goals, home_lat_deg=first.lat_deg, home_lon_deg=first.lon_deg)
-    target = {"target_system": args.target_system or EXECUTIVE_SYSTEM,
-              "target_component": args.target_component or EXECUTIVE_COMPONENT}
+    target = {"target_system": target_system or EXECUTIVE_SYSTEM,
+              "target_component": target_component or EXECUTIVE_COMPONENT}
     upload_goals(conn, items, **target)
     say(f"goals: {len(mission.goals)} accepted by system {target['target_system']} component {target['target_component']}")
     for n in sorted(blobs):
         remote = f"/tables/goal-{n}.lrpt"
-        put_file(conn, blobs[n], remote, timeout_s=args.timeout_s, **target)
+        put_file(conn, blobs[n], remote, timeout_s=timeout_s, **target)
         say(f"table for goal {n}: {len(blobs[n]):,} bytes accepted as {remote}")

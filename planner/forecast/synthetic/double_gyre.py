@@ -41,7 +41,6 @@ reads the file like any model file.
 
 from __future__ import annotations
 
-import argparse
 import datetime as dt
 import math
 import os
@@ -52,7 +51,6 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from planner.contract.arguments import floats
 from planner.contract.errors import LrauvError, PlannerError
 from planner.contract.geodesy import EARTH_RADIUS_M
 from planner.forecast.synthetic.cf_writer import (
@@ -76,7 +74,6 @@ __all__ = [
     "global_attrs",
     "gyre_axes",
     "gyre_velocity",
-    "settings_from_args",
     "synthesize_gyre",
     "write_gyre",
 ]
@@ -301,44 +298,3 @@ def global_attrs(settings: DoubleGyreSettings, issued: dt.datetime, last_h: floa
         "settings": repr(s),
     }
 
-
-# --------------------------------------------------------------------------- command line
-
-# Settings field (or check name) -> the command-line option that sets it.
-_OPTIONS = {
-    "bbox": "--bbox",
-    "spacing_deg": "--spacing-deg",
-    "depths_m": "--depths",
-    "hours": "--hours",
-    "step_h": "--step-h",
-    "hours, step_h": "--hours/--step-h",
-    "issue_time": "--issue-time",
-    "peak_speed_m_s": "--peak-speed-m-s",
-    "eps": "--eps",
-    "period_h": "--period-h",
-    "phase_rad": "--phase-rad",
-}
-
-
-def settings_from_args(args: argparse.Namespace) -> DoubleGyreSettings:
-    """``DoubleGyreSettings`` from ``lrauv forecast gyre``'s options (planner/cli.py); bad values raise ``PlannerError`` naming the option."""
-    kwargs: dict[str, object] = {}
-    for name in ("peak_speed_m_s", "eps", "period_h", "phase_rad", "hours", "step_h", "spacing_deg", "issue_time"):
-        value = getattr(args, name, None)
-        if value is not None:
-            kwargs[name] = value
-    if getattr(args, "bbox", None) is not None:
-        kwargs.update(zip(("west_deg", "south_deg", "east_deg", "north_deg"), _floats(args.bbox, 4, "--bbox")))
-    if getattr(args, "depths", None) is not None:
-        kwargs["depths_m"] = tuple(_floats(args.depths, None, "--depths"))
-    try:
-        return DoubleGyreSettings(**kwargs)  # type: ignore[arg-type]
-    except _FieldError as exc:
-        raise PlannerError(f"{_OPTIONS.get(exc.field, exc.field)}: {exc}") from None
-
-
-def _floats(text: str, n: int | None, option: str) -> list[float]:
-    try:
-        return floats(str(text), n, option)
-    except argparse.ArgumentTypeError as exc:
-        raise PlannerError(str(exc)) from None

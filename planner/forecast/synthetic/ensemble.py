@@ -46,7 +46,6 @@ members were drawn. Writes are atomic (``planner.contract.atomic``).
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import pathlib
@@ -70,7 +69,6 @@ __all__ = [
     "scb_ensemble",
     "synthesize_gyre_ensemble",
     "synthesize_scb_ensemble",
-    "write_ensemble_from_args",
     "write_gyre_ensemble",
     "write_scb_ensemble",
 ]
@@ -269,40 +267,3 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
 def _write(path: str | os.PathLike[str], ds: xr.Dataset) -> pathlib.Path:
     return write_netcdf(path, ds, _encoding(ds))
 
-
-# --------------------------------------------------------------------------- command line
-
-
-_GYRE_ONLY = ("peak_speed_m_s", "eps", "spread", "period_h", "step_h", "spacing_deg", "bbox", "depths", "issue_time")
-_SCB_ONLY = ("issue",)
-
-
-def _option(name: str) -> str:
-    return "--" + name.replace("_", "-")
-
-
-def write_ensemble_from_args(args: argparse.Namespace) -> pathlib.Path:
-    """``lrauv forecast ensemble``: write the ensemble that the options describe; bad values name the option."""
-    kind = getattr(args, "kind", None)
-    given = {name for name in (*_GYRE_ONLY, *_SCB_ONLY) if getattr(args, name, None) is not None}
-    try:
-        if kind == "gyre":
-            if wrong := sorted(given & set(_SCB_ONLY)):
-                raise PlannerError(f"{_option(wrong[0])}: only for --kind scb")
-            spread = 0.2 if getattr(args, "spread", None) is None else args.spread
-            settings = double_gyre.settings_from_args(args)  # names the option itself
-            return write_gyre_ensemble(args.out, settings, args.members, args.seed, spread)
-        if kind == "scb":
-            if wrong := sorted(given & set(_GYRE_ONLY)):
-                raise PlannerError(f"{_option(wrong[0])}: only for --kind gyre")
-            hours = 72.0 if getattr(args, "hours", None) is None else float(args.hours)
-            if not (math.isfinite(hours) and hours == int(hours) and hours >= 1):
-                raise PlannerError(f"--hours: --kind scb takes whole hours >= 1; got {args.hours!r}")
-            if not (_is_int(args.seed) and args.seed >= 0):
-                raise PlannerError(f"--seed: must be an integer >= 0; got {args.seed!r}")
-            settings = SyntheticSettings(seed=int(args.seed), hours=int(hours))
-            issue = 0 if getattr(args, "issue", None) is None else args.issue
-            return write_scb_ensemble(args.out, settings, args.members, issue)
-    except _ArgumentError as exc:
-        raise PlannerError(f"{_option(exc.argument)}: {exc}") from None
-    raise PlannerError(f"--kind: expected gyre or scb; got {kind!r}")

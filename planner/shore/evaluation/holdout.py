@@ -10,13 +10,11 @@ Runs are tasks of the runner, like ``lrauv evaluate``'s.
 
 from __future__ import annotations
 
-import argparse
-import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from planner.cluster import InProcess, Runner
-from planner.cluster import add_arguments as add_cluster_arguments
+from planner.cluster import InProcess, Runner, open_runner
 from planner.contract.errors import ShoreError
 
 
@@ -38,26 +36,14 @@ class HoldoutRow:
         return sum(self.single_success.values()) / len(self.single_success)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    p = sub.add_parser("holdout", help="ensemble plan against single-member plans, each flown in a member it did not see")
-    p.add_argument("mission", type=Path, help="mission YAML (region, vehicle, physical settings, first goal)")
-    p.add_argument("--ensemble", type=Path, required=True, help="forecast file with a member dimension (>= 3 members)")
-    p.add_argument("--starts", type=int, default=50, help="start states per held-out member (default 50)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--dt-s", type=float, default=5.0, help="physics step in seconds (default 5)")
-    p.add_argument("--max-hours", type=float, default=24.0, help="a run times out after this (default 24)")
-    add_cluster_arguments(p)
-    p.add_argument("--quiet", action="store_true")
-
-
 def holdout(mission_path: Path, ensemble: Path, *, starts: int, seed: int, dt_s: float, max_time_s: float,
             runner: Runner | None = None, held_out: list[int] | None = None) -> list[HoldoutRow]:
     """The rows of the comparison, one per held-out member (default: every member)."""
+    from planner.contract.mission import load_mission
+    from planner.forecast import ensemble_size, open_forecast
+    from planner.pipeline import MemberRef, PlanRequest, make_plan
     from planner.shore.evaluation.campaign import Campaign, CampaignSpec, MethodPlan, run_all, time_offset_s
     from planner.shore.evaluation.runs import Referee, pick_starts
-    from planner.forecast import ensemble_size, open_forecast
-    from planner.contract.mission import load_mission
-    from planner.pipeline import MemberRef, PlanRequest, make_plan
     from vehicle_sim.world import World
 
     runner = runner or InProcess()
@@ -94,35 +80,11 @@ def holdout(mission_path: Path, ensemble: Path, *, starts: int, seed: int, dt_s:
     return rows
 
 
-def run(args: argparse.Namespace) -> int:
-    import sys
-
-    from planner.cluster import open_runner
-
-    if args.starts < 1:
-        raise ShoreError(f"--starts: expected at least 1; got {args.starts}")
-    if not (math.isfinite(args.dt_s) and args.dt_s > 0 and math.isfinite(args.max_hours) and args.max_hours > 0):
-        raise ShoreError("--dt-s and --max-hours: expected numbers > 0")
-    with open_runner(args.scheduler, workers=args.workers) as runner:
-        if not args.quiet:
-            print(f"  runs and member sampling: {runner.describe()}", file=sys.stderr, flush=True)
-        rows = holdout(args.mission, args.ensemble, starts=args.starts, seed=args.seed, dt_s=args.dt_s,
-                       max_time_s=args.max_hours * 3600.0, runner=runner)
-    print(f"{'held out':>8} {'starts':>6} {'ensemble':>9} {'best single':>11} {'mean single':>11} {'worst single':>12}")
-    for r in rows:
-        print(f"{r.held_out:>8} {r.starts:>6} {r.ensemble_success:>9.1%} {r.best_single:>11.1%} {r.mean_single:>11.1%}"
-              f" {min(r.single_success.values()):>12.1%}")
-    per_member: dict[int, list[float]] = {}
-    for r in rows:
-        for j, v in r.single_success.items():
-            per_member.setdefault(j, []).append(v)
-    print("single     " + ", ".join(f"member {j} {sum(v) / len(v):.1%}" for j, v in sorted(per_member.items()))
-          + " (each plan's mean over the members it did not see)")
-    ens = sum(r.ensemble_success for r in rows) / len(rows)
-    single = sum(r.mean_single for r in rows) / len(rows)
-    beaten = sum(1 for r in rows for v in r.single_success.values() if r.ensemble_success > v)
-    ties = sum(1 for r in rows for v in r.single_success.values() if r.ensemble_success == v)
-    total = sum(len(r.single_success) for r in rows)
-    print(f"mean       ensemble {ens:.1%}, single-member plans {single:.1%}; the ensemble plan did better than "
-          f"{beaten} and as well as {ties} of {total} single-member plans in the member they did not see")
-    return 0
+def run_holdout(mission_path: Path, ensemble: Path, *, starts: int, seed: int, dt_s: float, max_time_s: float,
+                scheduler: str | None = None, workers: int | None = None,
+                note: Callable[[str], None] | None = None) -> list[HoldoutRow]:
+    """``holdout`` over every member, its runs and member sampling on the runner of ``scheduler``."""
+    with open_runner(scheduler, workers=workers) as runner:
+        if note is not None:
+            note(f"runs and member sampling: {runner.describe()}")
+        return holdout(mission_path, ensemble, starts=starts, seed=seed, dt_s=dt_s, max_time_s=max_time_s, runner=runner)

@@ -1,0 +1,176 @@
+"""``lrauv forecast``: describe a forecast file, or write a synthetic one (SCB, double gyre, ensemble).
+
+The options of ``planner.forecast.synthetic.double_gyre.DoubleGyreSettings`` and of
+``planner.forecast.synthetic.ensemble`` are declared here, so that building the parser
+imports no xarray; values are checked by the settings, and a bad one names its option.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pathlib
+from pathlib import Path
+from typing import Any
+
+from planner.contract.arguments import floats
+from planner.contract.errors import LrauvError, PlannerError
+
+# DoubleGyreSettings field (or check name) -> the option that sets it (the settings' errors name the field).
+GYRE_OPTIONS = {
+    "bbox": "--bbox",
+    "spacing_deg": "--spacing-deg",
+    "depths_m": "--depths",
+    "hours": "--hours",
+    "step_h": "--step-h",
+    "hours, step_h": "--hours/--step-h",
+    "issue_time": "--issue-time",
+    "peak_speed_m_s": "--peak-speed-m-s",
+    "eps": "--eps",
+    "period_h": "--period-h",
+    "phase_rad": "--phase-rad",
+}
+GYRE_ONLY = ("peak_speed_m_s", "eps", "spread", "period_h", "step_h", "spacing_deg", "bbox", "depths", "issue_time")
+SCB_ONLY = ("issue",)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    fc = sub.add_parser("forecast", help="inspect or generate forecasts")
+    fsub = fc.add_subparsers(dest="forecast_command", required=True)
+    info = fsub.add_parser("info", help="describe a forecast file as the loader understands it")
+    info.add_argument("file", type=Path)
+    info.add_argument("--variables", type=lambda t: t.split(","))
+    info.add_argument("--grid-file", type=Path)
+    synth = fsub.add_parser("synth", help="write the built-in synthetic Southern California Bight forecast")
+    synth.add_argument("out", type=Path)
+    synth.add_argument("--seed", type=int, default=0)
+    synth.add_argument("--hours", type=int, default=72)
+    synth.add_argument("--issue", type=int, help="forecast issue number (error shrinks with each issue); default: the truth")
+
+    gyre = fsub.add_parser("gyre", help="write the analytic double gyre (Shadden et al. 2005) as a forecast")
+    gyre.add_argument("out", type=Path)
+    gyre.add_argument("--peak-speed-m-s", type=float, help="peak speed of the steady gyre, m/s (default 0.5)")
+    gyre.add_argument("--eps", type=float, help="oscillation amplitude of the dividing line, 0..0.5 (default 0.1; 0 = steady)")
+    gyre.add_argument("--period-h", type=float, help="oscillation period in hours (default 12)")
+    gyre.add_argument("--phase-rad", type=float, help="oscillation phase at the issue time, radians (default 0)")
+    gyre.add_argument("--hours", type=float, help="forecast length in hours (default 48)")
+    gyre.add_argument("--step-h", type=float, help="time step in hours (default 1)")
+    gyre.add_argument("--spacing-deg", type=float, help="grid spacing in degrees (default 0.005)")
+    gyre.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.467)")
+    gyre.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
+    gyre.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+
+    ens = fsub.add_parser("ensemble", help="write a synthetic forecast ensemble: one file, u/v with a leading member dimension")
+    ens.add_argument("out", type=Path)
+    ens.add_argument("--kind", choices=["gyre", "scb"], required=True,
+                     help="gyre: double gyres with drawn eps, phase and peak speed; scb: one SCB forecast issue, independent error draws")
+    ens.add_argument("--members", type=int, required=True, help="number of members, 1..1000")
+    ens.add_argument("--seed", type=int, default=0,
+                     help="gyre: seed of the members' draws; scb: the scenario's seed, as `lrauv forecast synth --seed` (default 0)")
+    ens.add_argument("--hours", type=float, help="forecast length in hours (gyre: default 48; scb: whole hours, default 72)")
+    ens.add_argument("--peak-speed-m-s", type=float, help="gyre: base peak speed, m/s; members x U[1 - spread, 1 + spread] (default 0.5)")
+    ens.add_argument("--eps", type=float, help="gyre: base eps; members draw eps from U[0, min(2 eps, 0.5)] (default 0.1)")
+    ens.add_argument("--spread", type=float, help="gyre: relative spread of the members' peak speed, 0 <= spread < 1 (default 0.2)")
+    ens.add_argument("--period-h", type=float, help="gyre: oscillation period in hours (default 12)")
+    ens.add_argument("--step-h", type=float, help="gyre: time step in hours (default 1)")
+    ens.add_argument("--spacing-deg", type=float, help="gyre: grid spacing in degrees (default 0.005)")
+    ens.add_argument("--bbox", help="gyre: WEST,SOUTH,EAST,NORTH in degrees (default -118.2,33.3,-117.8,33.467)")
+    ens.add_argument("--depths", help="gyre: layer depths in metres (default 0,5,10,15)")
+    ens.add_argument("--issue-time", help="gyre: ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+    ens.add_argument("--issue", type=int, help="scb: forecast issue of every member, its issue time and error size (default 0)")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.forecast_command == "info":
+        from planner.forecast import describe, open_forecast
+
+        variables = tuple(args.variables) if args.variables else None
+        if variables is not None and len(variables) != 2:
+            raise LrauvError(f"--variables: expected two names U,V; got {args.variables}")
+        print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))  # type: ignore[arg-type]
+        return 0
+    if args.forecast_command == "ensemble":
+        print(f"wrote {write_ensemble_from_args(args)}")
+        return 0
+    if args.forecast_command == "gyre":
+        from planner.forecast.synthetic.double_gyre import write_gyre
+
+        print(f"wrote {write_gyre(args.out, settings_from_args(args))}")
+        return 0
+    from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
+
+    path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
+    print(f"wrote {path}")
+    return 0
+
+
+def settings_from_args(args: argparse.Namespace) -> Any:
+    """``DoubleGyreSettings`` from ``lrauv forecast gyre``'s options; bad values raise ``PlannerError`` naming the option."""
+    from planner.forecast.synthetic.double_gyre import DoubleGyreSettings
+
+    kwargs: dict[str, object] = {}
+    for name in ("peak_speed_m_s", "eps", "period_h", "phase_rad", "hours", "step_h", "spacing_deg", "issue_time"):
+        value = getattr(args, name, None)
+        if value is not None:
+            kwargs[name] = value
+    if getattr(args, "bbox", None) is not None:
+        kwargs.update(zip(("west_deg", "south_deg", "east_deg", "north_deg"), _floats(args.bbox, 4, "--bbox")))
+    if getattr(args, "depths", None) is not None:
+        kwargs["depths_m"] = tuple(_floats(args.depths, None, "--depths"))
+    try:
+        return DoubleGyreSettings(**kwargs)  # type: ignore[arg-type]
+    except PlannerError as exc:
+        field = getattr(exc, "field", None)  # the settings' errors carry the field they refuse
+        if field is None:
+            raise
+        raise PlannerError(f"{GYRE_OPTIONS.get(field, field)}: {exc}") from None
+
+
+def write_ensemble_from_args(args: argparse.Namespace) -> pathlib.Path:
+    """``lrauv forecast ensemble``: write the ensemble that the options describe; bad values name the option."""
+    from planner.forecast.synthetic.ensemble import write_gyre_ensemble, write_scb_ensemble
+    from planner.forecast.synthetic.scb import SyntheticSettings
+
+    kind = getattr(args, "kind", None)
+    given = {name for name in (*GYRE_ONLY, *SCB_ONLY) if getattr(args, name, None) is not None}
+    try:
+        if kind == "gyre":
+            if wrong := sorted(given & set(SCB_ONLY)):
+                raise PlannerError(f"{_option(wrong[0])}: only for --kind scb")
+            spread = 0.2 if getattr(args, "spread", None) is None else args.spread
+            settings = settings_from_args(args)  # names the option itself
+            return write_gyre_ensemble(args.out, settings, args.members, args.seed, spread)
+        if kind == "scb":
+            if wrong := sorted(given & set(GYRE_ONLY)):
+                raise PlannerError(f"{_option(wrong[0])}: only for --kind gyre")
+            hours = 72.0 if getattr(args, "hours", None) is None else float(args.hours)
+            if not (math.isfinite(hours) and hours == int(hours) and hours >= 1):
+                raise PlannerError(f"--hours: --kind scb takes whole hours >= 1; got {args.hours!r}")
+            if not (_is_int(args.seed) and args.seed >= 0):
+                raise PlannerError(f"--seed: must be an integer >= 0; got {args.seed!r}")
+            synthetic = SyntheticSettings(seed=int(args.seed), hours=int(hours))
+            issue = 0 if getattr(args, "issue", None) is None else args.issue
+            return write_scb_ensemble(args.out, synthetic, args.members, issue)
+    except PlannerError as exc:
+        argument = getattr(exc, "argument", None)  # the ensemble's errors carry the argument they refuse
+        if argument is None:
+            raise
+        raise PlannerError(f"{_option(argument)}: {exc}") from None
+    raise PlannerError(f"--kind: expected gyre or scb; got {kind!r}")
+
+
+def _option(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _is_int(value: object) -> bool:
+    import numpy as np
+
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+def _floats(text: str, n: int | None, option: str) -> list[float]:
+    try:
+        return floats(str(text), n, option)
+    except argparse.ArgumentTypeError as exc:
+        raise PlannerError(str(exc)) from None

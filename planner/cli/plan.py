@@ -1,0 +1,206 @@
+"""``lrauv plan``: plan a feedback policy (``planner.pipeline``) and write the policy table.
+
+A mission file gives everything; flags override it. The planning modules are imported
+in ``run`` only: building the parser stays light (``lrauv exec`` builds it too).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from planner.cli.cluster_options import add_cluster_arguments
+from planner.contract.arguments import floats
+from planner.contract.errors import LrauvError
+
+COST_NAMES = ("drift", "forward", "rotate", "glide")
+
+
+def costs(text: str) -> dict[str, float]:
+    """``--costs NAME=VALUE,...``: an argparse type; integers stay integers."""
+    out: dict[str, float] = {}
+    for part in text.split(","):
+        name, _, value = part.partition("=")
+        if name not in COST_NAMES or not value:
+            raise argparse.ArgumentTypeError(f"costs: expected NAME=VALUE with NAME in drift, forward, rotate, glide; got {part!r}")
+        try:
+            out[name] = float(value) if "." in value or "e" in value.lower() else int(value)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"costs.{name}: expected a number; got {value!r}") from None
+    return out
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    plan = sub.add_parser("plan", help="plan a feedback policy and write the policy table")
+    plan.add_argument("mission", nargs="?", type=Path, help="mission YAML file (flags below override it)")
+    plan.add_argument("--forecast", type=Path, nargs="+", metavar="FILE",
+                      help="forecast netCDF file; several files (or a file with a member dimension) are the members "
+                           "of an ensemble, the outcomes of the physical model")
+    plan.add_argument("--variables", type=lambda t: t.split(","), help="U,V variable names, when not found by CF standard names")
+    plan.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
+    plan.add_argument("--bbox", type=lambda t: floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
+    plan.add_argument("--nx", type=int, help="columns, west to east")
+    plan.add_argument("--ny", type=int, help="rows, south to north")
+    plan.add_argument("--depths", type=lambda t: floats(t, None, "depths"), help="layer depths in metres, e.g. 0,5,10,15")
+    plan.add_argument("--time-index", type=int, help="forecast time step by position (0 = first)")
+    plan.add_argument("--time", help="forecast time (ISO 8601); the nearest step is used")
+    plan.add_argument("--goal", type=lambda t: floats(t, 3, "goal"), help="LON,LAT,DEPTH of the goal")
+    plan.add_argument("--goal-radius", type=int, help="goal radius in cells (default 1)")
+    plan.add_argument("--model", choices=["paper", "physical"],
+                      help="planning model: the paper's graph (default) or the physical one (docs/physical-model.md)")
+    plan.add_argument("--criterion", choices=["robust", "optimistic", "expected"],
+                      help="paper: robust (default) or optimistic; physical: robust (default) or expected")
+    plan.add_argument("--uncertainty", choices=["lateral", "none"])
+    plan.add_argument("--costs", type=costs, help="e.g. drift=0,forward=4,rotate=10,glide=2")
+    plan.add_argument("--calm-speed", type=float, help="calm threshold in m/s (default 0.01)")
+    plan.add_argument("--out", type=Path, help="policy table to write (default: <mission name>.lrpt)")
+    plan.add_argument("--no-compress", action="store_true", help="store the table payload uncompressed")
+    plan.add_argument("--export-values", type=Path, help="also write the arrays of spec section 8 to this .npz")
+    plan.add_argument("--plot", type=Path, metavar="DIR", help="write PNG pictures of the flow, policy and nominal path here")
+    plan.add_argument("--plot-heading", type=int, default=0, help="heading k (0 = E, counter-clockwise) for the policy picture")
+    plan.add_argument("--plot-layer", type=int, help="layer for the policy picture (default: the goal's)")
+    plan.add_argument("--start", type=lambda t: floats(t, 4, "start"), help="LON,LAT,DEPTH,HEADING_DEG for the nominal path")
+    plan.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    add_cluster_arguments(plan)  # used when there is parallel work: several forecast members
+
+
+def run(args: argparse.Namespace) -> int:
+    from planner.contract.atomic import write_atomic
+    from planner.contract.mission import load_mission
+    from planner.pipeline import export_values, plan_with_scheduler
+    from planner.plan_summary import summary_lines, time_line
+
+    progress = not args.quiet
+    mission = None if args.mission is None else load_mission(args.mission)
+    request = plan_request(args, mission)
+    out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
+    t0 = time.perf_counter()
+    settings = request.settings
+    if progress:
+        how = f"physical, {settings.criterion}" if settings.model == "physical" else f"{settings.criterion}, {settings.uncertainty}"
+        print(f"planning on {request.forecast_path} ({how})", file=sys.stderr)
+    result = plan_with_scheduler(request, scheduler=args.scheduler, workers=args.workers, progress=progress)
+    data = result.table.to_bytes(compress=not args.no_compress)
+    write_atomic(out, data)
+    for line in summary_lines(result, out=out, size=len(data)):
+        print(line)
+    start = None if args.start is None else start_state(result, args.start)
+    if start is not None:
+        print(start_line(result, args.start, start))
+    print(time_line(result, time.perf_counter() - t0))
+    if args.export_values:
+        print(f"values     {export_values(result, args.export_values)}")
+    if args.plot:
+        from planner.shore.plots import default_start, plot_all
+
+        start = default_start(result.solution) if start is None else start
+        layer = args.plot_layer
+        if layer is not None and not 0 <= layer < result.grid.n_layers:
+            raise LrauvError(f"--plot-layer: expected 0..{result.grid.n_layers - 1}; got {layer}")
+        if not 0 <= args.plot_heading < 8:
+            raise LrauvError(f"--plot-heading: expected 0..7 (0 = east, counter-clockwise); got {args.plot_heading}")
+        paths = plot_all(result.u_m_s, result.v_m_s, result.solution, args.plot, start=start, heading=args.plot_heading,
+                         layer=layer)
+        for p in paths:
+            print(f"picture    {p}")
+    return 0
+
+
+def plan_request(args: argparse.Namespace, mission: Any) -> Any:
+    """The ``PlanRequest`` of the flags over the mission (None: flags only); bad or missing input raises LrauvError."""
+    from planner.contract.geodesy import BBox
+    from planner.contract.settings import CRITERIA, Costs, Goal, PlanSettings
+    from planner.pipeline import PlanRequest, mission_forecast
+
+    # Forecast: the flag, else the mission's source.
+    forecast_path = args.forecast[0] if args.forecast else None
+    ensemble = tuple(args.forecast[1:]) if args.forecast else ()
+    time_index, time_iso = args.time_index, args.time
+    variables = tuple(args.variables) if args.variables else None
+    grid_file = args.grid_file
+    if forecast_path is None and mission is not None:
+        forecast_path = mission_forecast(mission, out_dir=(args.out or Path(mission.name + ".lrpt")).parent)
+        if time_index is None and time_iso is None:
+            time_index, time_iso = mission.forecast.time_index, mission.forecast.time_iso
+        variables = variables or mission.forecast.variables
+        grid_file = grid_file or mission.forecast.grid_file
+    if forecast_path is None:
+        raise LrauvError("plan: no forecast: give --forecast FILE.nc or a mission file")
+    if variables is not None and len(variables) != 2:
+        raise LrauvError(f"--variables: expected two names U,V; got {','.join(variables)}")
+    # Grid.
+    bbox = BBox(west_deg=args.bbox[0], south_deg=args.bbox[1], east_deg=args.bbox[2], north_deg=args.bbox[3]) if args.bbox else None
+    nx, ny = args.nx, args.ny
+    depths = tuple(args.depths) if args.depths else None
+    if mission is not None:
+        bbox = bbox or mission.region.bbox
+        nx, ny = nx or mission.region.nx, ny or mission.region.ny
+        depths = depths or mission.region.depths_m
+    if depths is None:
+        raise LrauvError("plan: no depth layers: give --depths D0,D1,... or a mission file")
+    # Goal.
+    if args.goal is not None:
+        goal = Goal(lon_deg=args.goal[0], lat_deg=args.goal[1], depth_m=args.goal[2],
+                    radius_cells=args.goal_radius if args.goal_radius is not None else 1)
+    elif mission is not None:
+        goal = mission.goals[0].goal
+        if args.goal_radius is not None:
+            goal = Goal(lon_deg=goal.lon_deg, lat_deg=goal.lat_deg, depth_m=goal.depth_m, radius_cells=args.goal_radius)
+    else:
+        raise LrauvError("plan: no goal: give --goal LON,LAT,DEPTH or a mission file")
+    # Settings: the mission's (its vehicle figures and physical sampling included), flags override.
+    base = mission.settings if mission is not None else PlanSettings()
+    cost = base.costs
+    if args.costs:
+        fields = {"drift": cost.drift, "forward": cost.forward, "rotate": cost.rotate, "glide": cost.glide}
+        fields.update(args.costs)
+        cost = Costs(**fields)
+    model = args.model or base.model
+    criterion = args.criterion or base.criterion
+    if criterion not in CRITERIA[model]:
+        source = "" if args.criterion else f" (from {mission.path if mission is not None else 'the default'}; give --criterion)"
+        raise LrauvError(f"--criterion: the {model} model has {' and '.join(CRITERIA[model])}; got {criterion!r}{source}")
+    settings = replace(
+        base,
+        model=model,
+        criterion=criterion,
+        uncertainty=args.uncertainty or base.uncertainty,
+        costs=cost,
+        calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
+    )
+    return PlanRequest(
+        forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,
+        bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,  # type: ignore[arg-type]
+        grid_file=grid_file, ensemble=ensemble,
+    )
+
+
+def start_line(result: Any, given: list[float], start: tuple[int, int, int, int]) -> str:
+    """The predicted cost (and, for the physical model, time) to go from ``--start``."""
+    lon, lat, depth, heading = given
+    where = f"start      ({lon:g}, {lat:g}, {depth:g} m, {heading:g} deg), state (l, j, i, k) = {start}:"
+    sol = result.solution
+    cost, steps = sol.value(*start)
+    if not math.isfinite(cost):
+        return f"{where} cannot reach the goal"
+    if result.model.settings.model == "physical":
+        hours = float(sol.time_s[start]) / 3600.0
+        return f"{where} {cost:.1f} Wh, {hours:.2f} h to go ({result.model.settings.criterion})"
+    return f"{where} cost {cost:g}, {steps} steps ({result.model.settings.criterion})"
+
+
+def start_state(result: Any, start: list[float]) -> tuple[int, int, int, int]:
+    """The state (l, j, i, k) of ``--start LON,LAT,DEPTH,HEADING_DEG``; off the grid or on land raises LrauvError."""
+    lon, lat, depth, heading = start
+    cell = result.table.locate(lat, lon, depth)
+    if cell is None:
+        raise LrauvError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is outside the planning grid")
+    l, j, i = cell
+    if not result.model.water[l, j, i]:
+        raise LrauvError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is on land")
+    return (l, j, i, result.table.heading_index(j, heading))

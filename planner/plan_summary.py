@@ -1,0 +1,60 @@
+"""What a plan was, in the lines ``lrauv plan`` prints: the table, forecast, grid, model and reach; the time taken.
+
+``lrauv upload`` prints the same lines for each goal it plans on shore.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from planner.pipeline import PlanResult
+
+
+def summary_lines(result: PlanResult, *, out: Path, size: int) -> list[str]:
+    """The table written to ``out`` (``size`` bytes as written), its forecast, grid, model and reachable states."""
+    sol = result.solution
+    water_states = int(result.model.water.sum()) * 8
+    reachable = int(sol.reachable.sum())
+    raw = len(result.table.to_bytes(compress=False))
+    lines = [
+        f"table      {out}  ({size:,} bytes; {raw:,} uncompressed; {result.grid.n_states:,} states)",
+        (f"forecast   {result.table.forecast_source} [{result.table.forecast_identity}] step {result.time_index}"
+         f" ({result.table.forecast_time or 'no reference date'})"),
+        (f"grid       {result.grid.nx} x {result.grid.ny} cells x {result.grid.n_layers} layers"
+         f" ({', '.join(f'{d:g}' for d in result.grid.depth_m)} m) x 8 headings"),
+    ]
+    lines.extend(model_lines(result))
+    lines.append(f"reachable  {reachable:,} of {water_states:,} water states ({reachable / max(water_states, 1):.1%})")
+    return lines
+
+
+def model_lines(result: PlanResult) -> list[str]:
+    """What was planned: the paper model's settings, or the physical model's figures."""
+    s = result.model.settings
+    if s.model != "physical":
+        c = s.costs
+        return [f"model      paper, {s.criterion}, {s.uncertainty} uncertainty; costs drift {c.drift}, forward"
+                f" {c.forward}, rotate {c.rotate}, glide {c.glide}"]
+    m, sol, v = result.model, result.solution, s.vehicle
+    lines = [
+        (f"model      physical, {s.criterion}; costs in Wh (hotel {v.hotel_w:g} W, propulsion {v.propulsion_w:g} W"
+         f" at {v.cruise_speed_m_s:g} m/s, buoyancy {v.buoyancy_w:g} W)"),
+        (f"samples    {m.n_pairs:,} state-actions, {m.samples_per_action} samples per action"  # type: ignore[union-attr]
+         f" ({s.physical.start_points}x{s.physical.start_points} start points x {s.physical.error_members + 1}"
+         f" currents{f' x {m.members} forecast members' if m.members > 1 else ''}),"  # type: ignore[union-attr]
+         f" currents {m.refine}x finer than the grid"),  # type: ignore[union-attr]
+    ]
+    if s.criterion == "expected":
+        lines.append(f"solve      policy iteration: {sol.iterations} iterations, residual {sol.residual_wh:.2g} Wh")  # type: ignore[union-attr]
+    return lines
+
+
+def time_line(result: PlanResult, total_s: float) -> str:
+    """How long each stage took, and ``total_s`` in all."""
+    t = result.timings_s
+    stages = f"load {t['load_s']:.2f} s, resample {t['resample_s']:.2f} s, plan {t['plan_s']:.3f} s"
+    if "transitions_s" in t:  # the physical model's plan time: sampling the transitions, then solving
+        stages += f" (transitions {t['transitions_s']:.2f} s, solve {t['plan_s'] - t['transitions_s']:.3f} s)"
+    return f"time       {stages}, total {total_s:.2f} s"
