@@ -177,7 +177,7 @@ MAX_VALUES = 100_000  # values in the document once YAML aliases are expanded (a
 _LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
-class _Doc:
+class YamlDocument:
     """A YAML document with the line of every key path, for error messages."""
 
     def __init__(self, path: Path, text: str) -> None:
@@ -234,10 +234,10 @@ def _scalar(node: yaml.Node) -> Any:
     return loader.construct_object(node, deep=True)
 
 
-class _Section:
+class YamlSection:
     """Typed access to one mapping of the document, refusing unknown keys."""
 
-    def __init__(self, doc: _Doc, value: Any, key: str, allowed: set[str]) -> None:
+    def __init__(self, doc: YamlDocument, value: Any, key: str, allowed: set[str]) -> None:
         self.doc, self.key = doc, key
         if value is None:
             value = {}
@@ -305,8 +305,8 @@ class _Section:
             raise self.doc.error(self.path(name), f"expected true or false; got {v!r}")
         return v
 
-    def section(self, name: str, allowed: set[str]) -> _Section:
-        return _Section(self.doc, self.value.get(name), self.path(name), allowed)
+    def section(self, name: str, allowed: set[str]) -> YamlSection:
+        return YamlSection(self.doc, self.value.get(name), self.path(name), allowed)
 
 
 def load_mission(path: str | os.PathLike[str]) -> Mission:
@@ -322,8 +322,8 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         raise MissionError(f"{p}: no such mission file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise MissionError(f"{p}: cannot read: {exc}") from None
-    doc = _Doc(p, text)
-    top = _Section(doc, doc.root, "", {"name", "forecast", "region", "vehicle", "planning", "goals", "replanning", "safety",
+    doc = YamlDocument(p, text)
+    top = YamlSection(doc, doc.root, "", {"name", "forecast", "region", "vehicle", "planning", "goals", "replanning", "safety",
                                        "signing"})
     base = p.parent
 
@@ -419,7 +419,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     goals = []
     deepest = region.depths_m[-1]
     for n, g_raw in enumerate(goals_raw):
-        g = _Section(doc, g_raw, f"goals[{n}]", {"lat_deg", "lon_deg", "depth_m", "radius_cells", "on_arrival"})
+        g = YamlSection(doc, g_raw, f"goals[{n}]", {"lat_deg", "lon_deg", "depth_m", "radius_cells", "on_arrival"})
         lat = g.number("lat_deg", unit="degrees")
         lon = g.number("lon_deg", unit="degrees")
         depth = g.number("depth_m", unit="m", minimum=0)
@@ -471,7 +471,7 @@ PHYSICAL_INTEGERS = ("start_points", "error_members", "rk4_steps", "max_iteratio
 PHYSICAL_NUMBERS = {"current_error_m_s": "m/s", "max_transition_s": "s", "min_cost_wh": "Wh", "tolerance_wh": "Wh"}
 
 
-def _physical(doc: _Doc, pl: _Section) -> PhysicalSettings:
+def _physical(doc: YamlDocument, pl: YamlSection) -> PhysicalSettings:
     """``planning.physical``: the physical model's sampling (docs/physical-model.md); the paper model ignores it.
 
     A key that is absent or null keeps ``PhysicalSettings``' default (for ``max_transition_s`` that is None:
@@ -490,7 +490,7 @@ def _physical(doc: _Doc, pl: _Section) -> PhysicalSettings:
         raise doc.error(f"planning.{key}", message) from None
 
 
-def _signing(doc: _Doc, top: _Section, base: Path) -> Signing:
+def _signing(doc: YamlDocument, top: YamlSection, base: Path) -> Signing:
     sg = top.section("signing", {"key_file", "passphrase_env", "link_id"})
     sources = [k for k in ("key_file", "passphrase_env") if sg.has(k)]
     if len(sources) != 1:

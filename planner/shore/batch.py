@@ -48,7 +48,7 @@ class BatchResult:
 
 def load_fleet(path: Path) -> list[tuple[str, Path]]:
     """(vehicle name, mission path) of each entry of a fleet file; errors name file, line and key."""
-    from planner.contract.mission import _Doc, _Section
+    from planner.contract.mission import YamlDocument, YamlSection
 
     try:
         size = path.stat().st_size
@@ -59,15 +59,15 @@ def load_fleet(path: Path) -> list[tuple[str, Path]]:
         raise MissionError(f"{path}: no such fleet file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise MissionError(f"{path}: cannot read: {exc}") from None
-    doc = _Doc(path, text)
-    top = _Section(doc, doc.root, "", {"fleet"})
+    doc = YamlDocument(path, text)
+    top = YamlSection(doc, doc.root, "", {"fleet"})
     entries = top.raw("fleet")
     if not isinstance(entries, list) or not entries:
         raise doc.error("fleet", f"expected a list of {{vehicle: NAME, mission: FILE}}; got {entries!r}")
     out: list[tuple[str, Path]] = []
     seen: set[str] = set()
     for n, raw in enumerate(entries):
-        e = _Section(doc, raw, f"fleet[{n}]", {"vehicle", "mission"})
+        e = YamlSection(doc, raw, f"fleet[{n}]", {"vehicle", "mission"})
         name = e.text("vehicle")
         if not name or "/" in name or name in (".", ".."):
             raise doc.error(e.path("vehicle"), f"expected a vehicle name usable as a folder name; got {name!r}")
