@@ -394,6 +394,8 @@ def mission_forecast(mission: Mission, *, out_dir: Path) -> Path:
         return files[-1]
     from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
+    if src.synthetic_seed is None:  # load_mission gives a file, a directory or a synthetic seed
+        raise PlannerError(f"{mission.path}: forecast: expected a file, a directory or a synthetic seed")
     path = out_dir / f"synthetic_seed{src.synthetic_seed}_{src.synthetic_hours}h.nc"
     if not path.exists():
         write_synthetic(path, SyntheticSettings(seed=src.synthetic_seed, hours=src.synthetic_hours))

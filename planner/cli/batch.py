@@ -8,10 +8,11 @@ import sys
 from pathlib import Path
 
 from planner.cli.cluster_options import add_cluster_arguments
+from planner.contract.arguments import Subcommands
 from planner.contract.errors import ShoreError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parser(sub: Subcommands) -> None:
     p = sub.add_parser("batch", help="plan every goal of many missions (or a fleet file) as parallel tasks")
     p.add_argument("files", type=Path, nargs="+", help="mission YAML files and/or fleet YAML files")
     p.add_argument("--forecast", type=Path, help="plan every mission on this forecast (default: each mission's)")

@@ -7,8 +7,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from planner.contract.arguments import Subcommands
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+
+def add_parser(sub: Subcommands) -> None:
     p = sub.add_parser("demo", help="run the simulated vehicle and the executive over UDP to the goal")
     p.add_argument("--table", type=Path, required=True, help="policy table from `lrauv plan`")
     p.add_argument("--mission", type=Path, required=True, help="mission YAML (vehicle, safety, goal)")

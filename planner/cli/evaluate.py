@@ -13,12 +13,19 @@ from pathlib import Path
 from typing import Any
 
 from planner.cli.cluster_options import add_cluster_arguments
+from planner.contract.arguments import Subcommands
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import LrauvError
-from planner.shore.evaluation.runs import METHODS, OUTCOMES, MethodSummary, RunResult, summarise
+from planner.shore.evaluation.runs import (
+    METHODS,
+    OUTCOMES,
+    MethodSummary,
+    RunResult,
+    summarise,
+)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parser(sub: Subcommands) -> None:
     p = sub.add_parser("evaluate", help="Monte Carlo closed-loop comparison of plans over a truth field")
     p.add_argument("mission", type=Path, help="mission YAML: region, vehicle, planning settings, the first goal")
     p.add_argument("--forecast", type=Path, help="planning forecast (default: the mission's)")
@@ -45,7 +52,12 @@ def run(args: argparse.Namespace) -> int:
     from planner.cluster import open_runner
     from planner.contract.mission import load_mission
     from planner.pipeline import mission_forecast
-    from planner.shore.evaluation.campaign import CampaignSpec, prepare, resolution_change, run_all
+    from planner.shore.evaluation.campaign import (
+        CampaignSpec,
+        prepare,
+        resolution_change,
+        run_all,
+    )
     from vehicle_sim.world import WorldError, load_truth
 
     mission = load_mission(args.mission)

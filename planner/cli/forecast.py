@@ -13,7 +13,7 @@ import pathlib
 from pathlib import Path
 from typing import Any
 
-from planner.contract.arguments import floats
+from planner.contract.arguments import Subcommands, floats
 from planner.contract.errors import LrauvError, PlannerError
 
 # DoubleGyreSettings field (or check name) -> the option that sets it (the settings' errors name the field).
@@ -34,7 +34,7 @@ GYRE_ONLY = ("peak_speed_m_s", "eps", "spread", "period_h", "step_h", "spacing_d
 SCB_ONLY = ("issue",)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parser(sub: Subcommands) -> None:
     fc = sub.add_parser("forecast", help="inspect or generate forecasts")
     fsub = fc.add_subparsers(dest="forecast_command", required=True)
     info = fsub.add_parser("info", help="describe a forecast file as the loader understands it")
@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         variables = tuple(args.variables) if args.variables else None
         if variables is not None and len(variables) != 2:
             raise LrauvError(f"--variables: expected two names U,V; got {args.variables}")
-        print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))  # type: ignore[arg-type]
+        print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))
         return 0
     if args.forecast_command == "ensemble":
         print(f"wrote {write_ensemble_from_args(args)}")
@@ -128,7 +128,10 @@ def settings_from_args(args: argparse.Namespace) -> Any:
 
 def write_ensemble_from_args(args: argparse.Namespace) -> pathlib.Path:
     """``lrauv forecast ensemble``: write the ensemble that the options describe; bad values name the option."""
-    from planner.forecast.synthetic.ensemble import write_gyre_ensemble, write_scb_ensemble
+    from planner.forecast.synthetic.ensemble import (
+        write_gyre_ensemble,
+        write_scb_ensemble,
+    )
     from planner.forecast.synthetic.scb import SyntheticSettings
 
     kind = getattr(args, "kind", None)

@@ -9,10 +9,11 @@ import sys
 from pathlib import Path
 
 from planner.cli.cluster_options import add_cluster_arguments
+from planner.contract.arguments import Subcommands
 from planner.contract.errors import ShoreError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parser(sub: Subcommands) -> None:
     p = sub.add_parser("holdout", help="ensemble plan against single-member plans, each flown in a member it did not see")
     p.add_argument("mission", type=Path, help="mission YAML (region, vehicle, physical settings, first goal)")
     p.add_argument("--ensemble", type=Path, required=True, help="forecast file with a member dimension (>= 3 members)")

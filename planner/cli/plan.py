@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from planner.cli.cluster_options import add_cluster_arguments
-from planner.contract.arguments import floats
+from planner.contract.arguments import Subcommands, floats
 from planner.contract.errors import LrauvError
 
 COST_NAMES = ("drift", "forward", "rotate", "glide")
@@ -35,7 +35,7 @@ def costs(text: str) -> dict[str, float]:
     return out
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_parser(sub: Subcommands) -> None:
     plan = sub.add_parser("plan", help="plan a feedback policy and write the policy table")
     plan.add_argument("mission", nargs="?", type=Path, help="mission YAML file (flags below override it)")
     plan.add_argument("--forecast", type=Path, nargs="+", metavar="FILE",
@@ -175,7 +175,7 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     )
     return PlanRequest(
         forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,
-        bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,  # type: ignore[arg-type]
+        bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,
         grid_file=grid_file, ensemble=ensemble,
     )
 

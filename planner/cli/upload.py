@@ -7,8 +7,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from planner.contract.arguments import Subcommands
 
-def add_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+
+def add_parser(sub: Subcommands) -> None:
     up = sub.add_parser("upload", help="upload a mission's goals and tables to a running executive over MAVLink")
     up.add_argument("mission", type=Path, help="mission YAML")
     up.add_argument("--to", required=True, metavar="ADDRESS",

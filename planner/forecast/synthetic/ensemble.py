@@ -49,15 +49,21 @@ from __future__ import annotations
 import math
 import os
 import pathlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import xarray as xr
 
 from planner.contract.errors import PlannerError
 from planner.forecast.synthetic import double_gyre, scb
-from planner.forecast.synthetic.cf_writer import netcdf_encoding, parse_time, with_numeric_time, write_netcdf
+from planner.forecast.synthetic.cf_writer import (
+    netcdf_encoding,
+    parse_time,
+    with_numeric_time,
+    write_netcdf,
+)
 from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, synthesize_gyre
 from planner.forecast.synthetic.scb import SyntheticSettings, synthesize
 
@@ -233,7 +239,7 @@ def write_scb_ensemble(
 def _stack(
     datasets: Sequence[xr.Dataset],
     attrs: dict[str, object],
-    extra: dict[str, tuple[list[object], type, dict[str, str]]],
+    extra: Mapping[str, tuple[Sequence[object], Any, Mapping[str, str]]],
 ) -> xr.Dataset:
     """Members' datasets (same grid and times) as one dataset with ``u``, ``v`` along a leading ``member``."""
     first = with_numeric_time(datasets[0])
@@ -242,14 +248,14 @@ def _stack(
     for name in ("u", "v"):
         values = np.stack([ds[name].values for ds in datasets])
         data_vars[name] = ((MEMBER_DIM, *first[name].dims), values, dict(first[name].attrs))
-    for name, var in first.data_vars.items():
-        if name not in ("u", "v"):  # the same for every member (the SCB bathymetry h)
-            data_vars[str(name)] = var
-    for name, (values, dtype, var_attrs) in extra.items():
-        data_vars[name] = ((MEMBER_DIM,), np.asarray(values, dtype=dtype), var_attrs)
+    for key, var in first.data_vars.items():
+        if key not in ("u", "v"):  # the same for every member (the SCB bathymetry h)
+            data_vars[str(key)] = var
+    for extra_name, (member_values, dtype, var_attrs) in extra.items():
+        data_vars[extra_name] = ((MEMBER_DIM,), np.asarray(member_values, dtype=dtype), dict(var_attrs))
     member = (MEMBER_DIM, np.arange(n, dtype=np.int32), {"standard_name": "realization", "long_name": "ensemble member"})
     coords = {MEMBER_DIM: member, **{str(k): v for k, v in first.coords.items()}}
-    return xr.Dataset(data_vars=data_vars, coords=coords, attrs=attrs)  # type: ignore[arg-type]
+    return xr.Dataset(data_vars=data_vars, coords=coords, attrs=attrs)
 
 
 def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
@@ -258,9 +264,9 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
     for name in ("u", "v"):
         encoding[name]["chunksizes"] = (1, *encoding[name]["chunksizes"])  # type: ignore[misc]
     encoding[MEMBER_DIM] = {"dtype": "int32", "_FillValue": None}
-    for name in ds.data_vars:
-        if str(name).startswith("member_"):
-            encoding[str(name)] = {"_FillValue": None}
+    for key in ds.data_vars:
+        if str(key).startswith("member_"):
+            encoding[str(key)] = {"_FillValue": None}
     return encoding
 
 
