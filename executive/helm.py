@@ -204,15 +204,16 @@ def step(
             return Tick(helm, tuple(out.commands), tuple(out.events))
     if not vehicle.has_position:
         return Tick(helm, tuple(out.commands), tuple(out.events))
+    lat, lon, depth = _position(vehicle)
     helm, changed = _choose(helm, vehicle, table, config, now_s, out)
     helm = _realise(helm, vehicle, config, now_s, out)
     act = helm.activity
     assert act is not None
     decision = Decision(
         time_s=now_s,
-        lat_deg=vehicle.lat_deg,  # type: ignore[arg-type]
-        lon_deg=vehicle.lon_deg,  # type: ignore[arg-type]
-        depth_m=vehicle.depth_m,  # type: ignore[arg-type]
+        lat_deg=lat,
+        lon_deg=lon,
+        depth_m=depth,
         heading_deg=vehicle.heading_deg,
         cell=act.cell,
         situation=act.situation,
@@ -230,6 +231,13 @@ def swapped(helm: HelmState) -> HelmState:
 
 
 # -- phases -------------------------------------------------------------------------
+
+
+def _position(vehicle: VehicleState) -> tuple[float, float, float]:
+    """(lat, lon, depth) of a vehicle that ``has_position``: the helm decides only with one."""
+    lat, lon, depth = vehicle.lat_deg, vehicle.lon_deg, vehicle.depth_m
+    assert lat is not None and lon is not None and depth is not None
+    return lat, lon, depth
 
 
 def _due(last_s: float | None, now_s: float, period_s: float) -> bool:
@@ -313,7 +321,8 @@ def _breach(situation: Situation, vehicle: VehicleState, config: HelmConfig, now
     if config.on_breach == "drift":
         target = DepthTarget(float(vehicle.depth_m or 0.0))
     elif config.on_breach == "hold":
-        target = PositionTarget(float(vehicle.lat_deg), float(vehicle.lon_deg), float(vehicle.depth_m or 0.0))  # type: ignore[arg-type]
+        lat, lon, _ = _position(vehicle)
+        target = PositionTarget(float(lat), float(lon), float(vehicle.depth_m or 0.0))
     return Activity(situation=situation, action=None, cell=None, mode=mode, target=target, started_s=now_s)
 
 
@@ -332,14 +341,13 @@ def _choose(
         return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_request_s=None), True
     if helm.phase is Phase.ARRIVED and current is not None:
         return helm, False
-    lat, lon, depth = vehicle.lat_deg, vehicle.lon_deg, vehicle.depth_m
-    assert lat is not None and lon is not None and depth is not None
+    lat, lon, depth = _position(vehicle)
     heading = vehicle.heading_deg if vehicle.heading_deg is not None else math.nan
     if table is None:
         new = Activity(situation=Situation.NO_TABLE, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
         return _switch(helm, current, new, out, "no valid policy table: surfacing")
     held = current.cell[1:3] if current is not None and current.cell is not None else None
-    look = table.lookup_held(lat, lon, depth, heading, held, config.cell_margin)  # type: ignore[arg-type]
+    look = table.lookup_held(lat, lon, depth, heading, held, config.cell_margin)
     if current is not None and current.completes and look.reason in ("ok", "unreachable"):
         assert current.steering is not None
         if not is_complete(current.steering, heading_deg=vehicle.heading_deg, depth_m=depth):
@@ -359,8 +367,9 @@ def _choose(
         new = Activity(situation=Situation.LAND, action=None, cell=look.state, mode=SubMode.SURFACE, target=None, started_s=now_s)
         return _switch(helm, current, new, out, f"position in a land cell {look.state}: surfacing")
     if look.reason == "unreachable":
+        assert look.state is not None  # a cell of the grid: only outside_grid has no state
         new = Activity(situation=Situation.UNREACHABLE, action=None, cell=look.state, mode=SubMode.ALT_HOLD,
-                       target=DepthTarget(table.depth_m[look.state[0]]), started_s=now_s)  # type: ignore[index]
+                       target=DepthTarget(table.depth_m[look.state[0]]), started_s=now_s)
         return _switch(helm, current, new, out, f"no action reaches the goal from {look.state}: drifting at depth")
     assert look.state is not None
     new = _action_activity(look.action, look.state, table, config, now_s)
@@ -381,27 +390,31 @@ def _action_activity(action: Action, state: tuple[int, int, int, int], table: Po
     steering = steer(action, state, table, cruise_speed_m_s=config.cruise_speed_m_s,
                      yaw_rate_deg_s=config.yaw_rate_deg_s, glide_rate_m_s=config.glide_rate_m_s,
                      depth_tolerance_m=config.depth_tolerance_m)
-    base = dict(situation=Situation.FOLLOWING, action=action, cell=state, started_s=now_s, steering=steering)
     if steering.kind is SteeringKind.DEPTH:
         # ALT_HOLD: no horizontal thrust, the current carries the vehicle while the depth is held or sought.
         assert steering.depth_m is not None
-        return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(steering.depth_m), **base)  # type: ignore[arg-type]
+        return Activity(situation=Situation.FOLLOWING, action=action, cell=state, mode=SubMode.ALT_HOLD,
+                        target=DepthTarget(steering.depth_m), started_s=now_s, steering=steering)
     # GUIDED, zero vertical velocity (the depth it is at is held): VELOCITY along the course, ROTATE with
     # zero velocity, which ArduSub flies as station keeping while it turns to the yaw.
     assert steering.yaw_deg is not None
     north, east = steering.velocity_ne_m_s
-    return Activity(mode=SubMode.GUIDED, target=VelocityYaw(north, east, 0.0, steering.yaw_deg), **base)  # type: ignore[arg-type]
+    return Activity(situation=Situation.FOLLOWING, action=action, cell=state, mode=SubMode.GUIDED,
+                    target=VelocityYaw(north, east, 0.0, steering.yaw_deg), started_s=now_s, steering=steering)
 
 
 def _arrival(state: tuple[int, int, int, int] | None, vehicle: VehicleState, table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:
-    base = dict(situation=Situation.AT_GOAL, action=Action.AT_GOAL, cell=state, started_s=now_s)
+    mode: SubMode
+    target: Command | None
     if config.on_arrival == "surface":
-        return Activity(mode=SubMode.SURFACE, target=None, **base)  # type: ignore[arg-type]
-    if config.on_arrival == "drift":
-        return Activity(mode=SubMode.ALT_HOLD, target=DepthTarget(float(vehicle.depth_m or 0.0)), **base)  # type: ignore[arg-type]
-    # hold (and "next", until multi-goal missions land): keep station where the goal was reached.
-    hold = PositionTarget(float(vehicle.lat_deg), float(vehicle.lon_deg), table.goal_depth_m)  # type: ignore[arg-type]
-    return Activity(mode=SubMode.GUIDED, target=hold, **base)  # type: ignore[arg-type]
+        mode, target = SubMode.SURFACE, None
+    elif config.on_arrival == "drift":
+        mode, target = SubMode.ALT_HOLD, DepthTarget(float(vehicle.depth_m or 0.0))
+    else:  # hold (and "next", until multi-goal missions land): keep station where the goal was reached.
+        lat, lon, _ = _position(vehicle)
+        mode, target = SubMode.GUIDED, PositionTarget(float(lat), float(lon), table.goal_depth_m)
+    return Activity(situation=Situation.AT_GOAL, action=Action.AT_GOAL, cell=state, mode=mode, target=target,
+                    started_s=now_s)
 
 
 def _realise(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:

@@ -306,6 +306,17 @@ def read_time(
     return time_s, origin
 
 
+def _scalar_depth(ds: xr.Dataset, var: xr.DataArray) -> tuple[str, xr.Variable] | None:
+    """(name, variable) of the 0-d depth named in ``var``'s ``coordinates`` (or called 'depth'); None without one."""
+    coords = str(var.attrs.get("coordinates", "")).split()
+    for cname in coords + ["depth"]:
+        if cname in ds.variables and ds.variables[cname].ndim == 0:
+            cand = ds.variables[cname]
+            if attr(cand, "standard_name") in {"depth", "height"} or cname.lower() in _DEPTH_NAMES:
+                return cname, cand
+    return None
+
+
 def read_depth_axis(
     ds: xr.Dataset, var: xr.DataArray, label: str, zdim: str | None, notes: list[str]
 ) -> NDArray[np.float64] | None:
@@ -322,18 +333,11 @@ def read_depth_axis(
             )
         zvar = ds.variables[zdim]
     else:
-        zvar = None
-        coords = str(var.attrs.get("coordinates", "")).split()
-        for cname in coords + ["depth"]:
-            if cname in ds.variables and ds.variables[cname].ndim == 0:
-                cand = ds.variables[cname]
-                if attr(cand, "standard_name") in {"depth", "height"} or cname.lower() in _DEPTH_NAMES:
-                    zvar = cand
-                    zdim = cname
-                    break
-        if zvar is None:
+        scalar = _scalar_depth(ds, var)
+        if scalar is None:
             notes.append("no depth axis: the field applies to every layer (spec section 1)")
             return None
+        zdim, zvar = scalar
     values = np.atleast_1d(numbers(zvar, f"depth variable {zdim}", label))
     if not np.all(np.isfinite(values)):
         raise ForecastError(f"{label}: depth variable {zdim} has missing values; expected finite depths in metres")

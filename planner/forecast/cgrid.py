@@ -112,6 +112,7 @@ def read_c_grid(
     # Land masks (1 = water): land u/v are not NaN in these files (spec section 1 'land').
     mask_rho_f = ctx.find(("mask_rho",), (ny, nx))
     mask_rho = None if mask_rho_f is None else _mask01(mask_rho_f[1])
+    mask_rho_from = "" if mask_rho_f is None else mask_rho_f[2]  # the file it was found in
     mask_u = _c_grid_mask(ctx, "mask_u", (nyu, nxu), mask_rho, "x", notes)
     mask_v = _c_grid_mask(ctx, "mask_v", (nyv, nxv), mask_rho, "y", notes)
     if mask_u is not None:
@@ -128,7 +129,7 @@ def read_c_grid(
     if mask_rho is not None:
         u = np.where(mask_rho, u, np.nan)
         v = np.where(mask_rho, v, np.nan)
-        notes.append(f"mask_rho applied from {mask_rho_f[2]}")
+        notes.append(f"mask_rho applied from {mask_rho_from}")
     if mask_rho is None and mask_u is None and mask_v is None:
         notes.append("no mask_rho/mask_u/mask_v found: land is only where the file's values are missing")
 

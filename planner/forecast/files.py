@@ -39,7 +39,8 @@ def file_identity(path: Path, label: str | None = None) -> str:
 
 # Lazily opened: no index is built from a coordinate at open time, so a damaged header that
 # claims a huge dimension is refused (MAX_VALUES_PER_VARIABLE) before anything is read.
-_LAZY_OPEN = (
+# Values typed Any: mypy checks an unpacked dict's value type against every keyword parameter of open_dataset.
+_LAZY_OPEN: dict[str, Any] = (
     {"create_default_indexes": False}
     if "create_default_indexes" in inspect.signature(xr.open_dataset).parameters
     else {}

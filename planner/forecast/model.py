@@ -158,8 +158,9 @@ class Forecast:
         if isinstance(file_time_index, bool) or not isinstance(file_time_index, (int, np.integer)):
             raise ForecastError(f"{self.source}: time index: expected an integer; got {file_time_index!r}")
         index = int(file_time_index)
-        held = None if self.window is None else self.window.time_index
-        if held is None:
+        window = self.window
+        held = None if window is None else window.time_index
+        if window is None or held is None:
             if not 0 <= index < self.n_times:
                 raise ForecastError(
                     f"{self.source}: time index {index} out of range: the forecast has {self.n_times} time steps, "
@@ -169,7 +170,7 @@ class Forecast:
         if index != held:
             raise ForecastError(
                 f"{self.source}: time index {index}: this forecast was opened with time_index={held} and holds only "
-                f"that step of the file's {self.window.n_times}; open the file again with time_index={index}"  # type: ignore[union-attr]
+                f"that step of the file's {window.n_times}; open the file again with time_index={index}"
             )
         return 0
 
@@ -305,7 +306,8 @@ def nearest_time_index(forecast: Forecast | ForecastTimes, when: np.datetime64) 
             "choose the time step by position with --time-index"
         )
     try:
-        moment = np.datetime64(when, "ms")
+        # numpy's stubs lack the (datetime64, unit) overload that the constructor accepts at run time
+        moment = np.datetime64(when, "ms")  # type: ignore[call-overload]
     except (ValueError, TypeError) as exc:
         raise ForecastError(f"{forecast.source}: time: expected a numpy.datetime64; got {when!r}") from exc
     if np.isnat(moment):

@@ -137,10 +137,10 @@ class FeedbackPilot:
             depth = table.depth_m[look.state[0]] if look.reason == "unreachable" else 0.0
             self._setpoint = Setpoint(kind=SetpointKind.DEPTH, depth_m=depth)
             return self._setpoint
-        sp, done = realise(look.action, look.state, table, body, self._params)
+        sp, completed = realise(look.action, look.state, table, body, self._params)
         self._setpoint = sp
-        if done is not None:
-            self._held = (sp, done)
+        if completed is not None:
+            self._held = (sp, completed)
         return sp
 
 

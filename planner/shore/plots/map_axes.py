@@ -111,7 +111,7 @@ def geo_axes(mpl: Any, ax: Any, grid: Grid, *, xlabel: bool = True, ylabel: bool
 def _degree_formatter(mpl: Any, pos_letter: str, neg_letter: str) -> Any:
     """Tick labels like ``118.15°W`` with as few decimals as the tick spacing needs."""
 
-    class DegreeFormatter(mpl.ticker.Formatter):  # type: ignore[misc, name-defined]
+    class DegreeFormatter(mpl.ticker.Formatter):
         decimals = 2
 
         def format_ticks(self, values: Any) -> list[str]:

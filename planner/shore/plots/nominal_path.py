@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 from collections import Counter
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -27,7 +28,7 @@ from planner.shore.plots.map_axes import (
     geo_axes,
     panel_height,
 )
-from planner.shore.plots.solutions import is_physical, nominal_steps
+from planner.shore.plots.solutions import NominalStep, is_physical, nominal_steps
 from planner.shore.plots.style import (
     ACTION_COLORS,
     FLOW_ARROW_COLOR,
@@ -44,7 +45,7 @@ from planner.shore.plots.style import (
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from planner.grid import Grid
-    from planner.paper.solve import PathStep
+    from planner.paper.solve import PathStep, Solution
     from planner.physical.solve import PhysicalSolution, PhysicalStep
     from planner.shore.plots.solutions import AnySolution
 
@@ -70,7 +71,13 @@ def plot_nominal_path(
     model = solution.model
     grid = model.grid
     start = _check_state(start, solution)
-    steps = nominal_steps(solution, start)
+    steps: Sequence[NominalStep]
+    if is_physical(solution):
+        physical_steps = nominal_steps(solution, start)
+        steps, summary = physical_steps, _physical_path_summary(solution, start, physical_steps)
+    else:
+        paper_steps = nominal_steps(solution, start)
+        steps, summary = paper_steps, _paper_path_summary(solution, start, paper_steps)
     layers_visited = Counter(s.l for s in steps)
     gl = solution.goal_cells.l
     lb = max(layers_visited, key=lambda ll: (layers_visited[ll], ll == gl, -ll))
@@ -167,7 +174,7 @@ def plot_nominal_path(
                   (float(grid.lon_deg[gc.i]), float(grid.lat_deg[gc.j]), 11.0)]
     keep_clear += [(float(xx), float(yy), 4.0) for xx, yy in zip(x, y)]
     _place_labels(fig, ax, _layer_change_labels(steps, grid), keep_clear)
-    side.text(0.02, 0.02, _path_summary(solution, start, steps), transform=side.transAxes, va="bottom", ha="left",
+    side.text(0.02, 0.02, summary, transform=side.transAxes, va="bottom", ha="left",
               fontsize=8.5, family="monospace",
               bbox={"boxstyle": "round,pad=0.5", "facecolor": "white", "edgecolor": "0.6"})
     return save_png(fig, path)
@@ -242,13 +249,13 @@ def _draw_flow_directions(mpl: Any, ax: Any, grid: Grid, flow_dir: NDArray[np.in
                 color=FLOW_ARROW_COLOR, zorder=3)
 
 
-def _layer_change_labels(steps: list[PathStep] | list[PhysicalStep], grid: Grid) -> list[tuple[float, float, str, str]]:
+def _layer_change_labels(steps: Sequence[NominalStep], grid: Grid) -> list[tuple[float, float, str, str]]:
     """Depth labels ``(lon, lat, text, colour)`` for the path's UP/DOWN actions.
 
     Layer changes within two cells of the previous one share a label, e.g.
     ``↓ 0 → 5 → 10 m``, so that a dive through several layers reads as one.
     """
-    clusters: list[list[tuple[Any, Any]]] = []
+    clusters: list[list[tuple[NominalStep, NominalStep]]] = []
     for s0, s1 in zip(steps[:-1], steps[1:]):
         if s0.action not in (Action.UP, Action.DOWN):
             continue
@@ -316,9 +323,8 @@ def _overlap_area(a: tuple[float, float, float, float], b: tuple[float, float, f
     return w * h if w > 0 and h > 0 else 0.0
 
 
-def _path_summary(solution: AnySolution, start: tuple[int, int, int, int], steps: list[Any]) -> str:
-    if is_physical(solution):
-        return _physical_path_summary(solution, start, steps)  # type: ignore[arg-type]
+def _paper_path_summary(solution: Solution, start: tuple[int, int, int, int], steps: list[PathStep]) -> str:
+    """The side text of the nominal path picture for a paper plan: costs in the plan's energy units."""
     settings = solution.model.settings
     l, j, i, k = start
     cost, n = solution.value(l, j, i, k)
@@ -371,7 +377,7 @@ def _lonlat(lon: float, lat: float) -> str:
     return f"{abs(lon):.4f}\u00b0{'E' if lon >= 0 else 'W'} {abs(lat):.4f}\u00b0{'N' if lat >= 0 else 'S'}"
 
 
-def _start_and_goal(solution: Any, start: tuple[int, int, int, int]) -> list[str]:
+def _start_and_goal(solution: AnySolution, start: tuple[int, int, int, int]) -> list[str]:
     """The first lines of a nominal path's side text: where it starts and where the goal is."""
     grid = solution.model.grid
     l, j, i, k = start

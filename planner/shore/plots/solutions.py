@@ -7,44 +7,79 @@ section 5); a physical plan follows each action's most likely outcome
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Protocol, overload
 
 from planner.contract.actions import Action
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from planner.paper.solve import Solution
-    from planner.physical.solve import PhysicalSolution
+    from typing_extensions import TypeIs
+
+    from planner.paper.solve import PathStep, Solution
+    from planner.physical.solve import PhysicalSolution, PhysicalStep
 
     AnySolution = Solution | PhysicalSolution
 
-__all__ = ["is_physical", "nominal_displacement", "nominal_steps"]
+__all__ = ["NominalStep", "is_physical", "nominal_displacement", "nominal_steps"]
 
 
-def is_physical(solution: Any) -> bool:
-    """Whether ``solution`` is a physical plan (its settings' ``model``; "paper" when absent)."""
+class NominalStep(Protocol):
+    """A step of a nominal path, paper (``PathStep``) or physical (``PhysicalStep``): state and action."""
+
+    @property
+    def l(self) -> int: ...
+
+    @property
+    def j(self) -> int: ...
+
+    @property
+    def i(self) -> int: ...
+
+    @property
+    def k(self) -> int: ...
+
+    @property
+    def action(self) -> Action: ...
+
+
+def is_physical(solution: AnySolution) -> TypeIs[PhysicalSolution]:
+    """Whether ``solution`` is a physical plan (its settings' ``model``; "paper" when absent).
+
+    The settings name the model that made the solution (``planner.pipeline`` solves with the
+    physical model exactly when ``model`` is "physical"), hence the narrowing to either type.
+    """
     return getattr(solution.model.settings, "model", "paper") == "physical"
 
 
-def nominal_steps(solution: AnySolution, start: tuple[int, int, int, int]) -> list[Any]:
+@overload
+def nominal_steps(solution: PhysicalSolution, start: tuple[int, int, int, int]) -> list[PhysicalStep]: ...
+@overload
+def nominal_steps(solution: Solution, start: tuple[int, int, int, int]) -> list[PathStep]: ...
+@overload
+def nominal_steps(
+    solution: AnySolution, start: tuple[int, int, int, int]
+) -> list[PathStep] | list[PhysicalStep]: ...
+def nominal_steps(
+    solution: AnySolution, start: tuple[int, int, int, int]
+) -> list[PathStep] | list[PhysicalStep]:
     """The nominal path: ``planner.paper.solve.nominal_path`` (paper) or ``PhysicalSolution.nominal``."""
     if is_physical(solution):
-        return solution.nominal(start)  # type: ignore[union-attr]
+        return solution.nominal(start)
     from planner.paper.solve import nominal_path
 
-    return nominal_path(solution, start)  # type: ignore[arg-type]
+    return nominal_path(solution, start)
 
 
 def nominal_displacement(solution: AnySolution, l: int, j: int, i: int, k: int, a: Action) -> tuple[int, int]:
     """Horizontal displacement ``(di, dj)`` of the action's nominal outcome (spec section 5); for a physical
     plan, of the policy's pair's most likely outcome (ties: the first listed)."""
-    model = solution.model
     if is_physical(solution):
-        pair = int(solution.policy_pair[model.state_index(l, j, i, k)])  # type: ignore[union-attr]
+        model = solution.model
+        pair = int(solution.policy_pair[model.state_index(l, j, i, k)])
         if pair < 0:
             return (0, 0)
-        (_, jj, ii, _), _, _ = max(model.outcomes(pair), key=lambda o: o[1])  # type: ignore[call-arg, arg-type]
+        (_, jj, ii, _), _, _ = max(model.outcomes(pair), key=lambda o: o[1])
         return (ii - i, jj - j)
-    outs = model.outcomes(l, j, i, k, a)  # type: ignore[call-arg]
+    outs = solution.model.outcomes(l, j, i, k, a)
     if not outs:
         return (0, 0)
     _, jj, ii, _ = outs[0]

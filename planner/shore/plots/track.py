@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from planner.contract.errors import ShoreError
 from planner.shore.plots.map_axes import draw_land, geo_axes, panel_height
 from planner.shore.plots.style import GOAL_COLOR, START_COLOR, WATER_COLOR, load_matplotlib, new_figure, save_png
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from planner.contract.table import PolicyTable
 
 __all__ = ["plot_track"]
 
@@ -20,7 +24,9 @@ _MODE_STYLE = {4: ("GUIDED (forward, rotate, hold)", "#d55e00"), 2: ("ALT_HOLD (
                9: ("SURFACE", "#7f7f7f"), 19: ("MANUAL", "#cc79a7")}
 
 
-def plot_track(table: Any, lon_deg: Any, lat_deg: Any, mode: Any, path: str | os.PathLike[str]) -> Path:
+def plot_track(
+    table: PolicyTable, lon_deg: ArrayLike, lat_deg: ArrayLike, mode: ArrayLike, path: str | os.PathLike[str]
+) -> Path:
     """A vehicle track over the table's land and goal, coloured by autopilot mode.
 
     ``table`` is a ``planner.contract.table.PolicyTable``; ``lon_deg``, ``lat_deg`` and ``mode``

@@ -248,12 +248,12 @@ def _page(dive: Dive, summary_text: str, drawn: list[tuple[str, str]], notes: li
 def _first_table(dive: Dive, tables: Mapping[str, PolicyTable], plan: PlanResult | None) -> PolicyTable | None:
     """The first table the track used, else the first one loaded (POLICY records), else any logged, else the plan's."""
     for crc in dict.fromkeys(dive.track.table_crc32):
-        if crc in tables:
+        if crc is not None and crc in tables:
             return tables[crc]
     for p in dive.policy:
-        crc = p.get("table_crc32")
-        if p.get("reason") in ("loaded", "swapped") and crc in tables:
-            return tables[crc]
+        logged = p.get("table_crc32")
+        if p.get("reason") in ("loaded", "swapped") and logged is not None and logged in tables:
+            return tables[logged]
     if tables:
         return next(iter(tables.values()))
     return None if plan is None else plan.table
@@ -328,7 +328,10 @@ def _action_order(actions: Sequence[str | None]) -> list[str | None]:
 def _start_state(track: Track, rows: NDArray[np.bool_]) -> tuple[int, int, int, int] | None:
     """The first table state among ``rows`` (a mask), or None."""
     valid = np.flatnonzero(rows & np.all(track.cell >= 0, axis=1))
-    return None if valid.size == 0 else tuple(int(x) for x in track.cell[valid[0]])  # type: ignore[return-value]
+    if valid.size == 0:
+        return None
+    l, j, i, k = (int(x) for x in track.cell[valid[0]])
+    return (l, j, i, k)
 
 
 def _plot_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: PlanResult | None,
@@ -554,7 +557,7 @@ def _plot_timeseries(dive: Dive, path: Path) -> str:
         ax.tick_params(labelsize=8.5)
     start = dive.utc_s(float(track.time_s[0]))
     when = ""
-    if start is not None and math.isfinite(start):
+    if isinstance(start, float) and math.isfinite(start):  # utc_s of a float: a float, or None without UTC
         when = ", first decision at " + str(np.datetime64(int(round(start)), "s")).replace("T", " ") + " UTC"
     fig.suptitle(f"{dive.log.path.name}: {n:,} decisions{when}", fontsize=12)
     save_png(fig, path)
