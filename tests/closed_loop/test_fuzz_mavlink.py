@@ -20,10 +20,11 @@ from executive.state import Phase, VehicleState
 from vehicle_sim.endpoint import SimConfig, Simulator
 from vehicle_sim.world import World
 
-from tests.helpers import assert_audit_clean
-from tests.mavfuzz import (
+from tests.support.helpers import assert_audit_clean
+from tests.support.mavfuzz import (
     ExecutiveHarness,
     autopilot_frames,
+    autopilot_state,
     executive_frames,
     invalid_frames,
     noisy_stream,
@@ -100,13 +101,6 @@ def teardown_module() -> None:
 # -- the simulator --------------------------------------------------------------------------------
 
 
-def _autopilot_state(sim: Simulator) -> dict:
-    ap = sim.autopilot
-    return {"mode": ap.mode, "armed": ap.armed, "setpoint": ap.setpoint, "guided": ap._guided,
-            "hold": ap._hold_depth_m, "deadline": ap._velocity_deadline_s, "heartbeat": ap._last_heartbeat_s,
-            "failsafe": ap.failsafe_active}
-
-
 def _sim_feed(sim: Simulator, sender: socket.socket, frames) -> None:  # type: ignore[no-untyped-def]
     for n, data in enumerate(frames):
         sender.sendto(data, (sim.host, sim.port))
@@ -120,10 +114,10 @@ def test_the_simulator_takes_invalid_frames_without_a_change(synthetic_forecast)
     with Simulator(World.load(synthetic_forecast), SimConfig(start_lon_deg=-118.0, start_lat_deg=33.5, port=0)) as sim, \
             socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
         sender.bind(("127.0.0.1", 0))
-        before = _autopilot_state(sim)
+        before = autopilot_state(sim)
         frames = invalid_frames(executive_frames(50), rng)
         _sim_feed(sim, sender, (next(frames) for _ in range(N_INVALID)))
-        assert _autopilot_state(sim) == before
+        assert autopilot_state(sim) == before
         assert sim.stats.messages_in == 0 and sim.stats.datagrams_in == N_INVALID
 
 
@@ -138,6 +132,6 @@ def test_the_simulator_obeys_the_valid_frames_among_corrupted_ones_as_if_alone(s
                 socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
             sender.bind(("127.0.0.1", 0))
             _sim_feed(sim, sender, frames)
-            states.append((_autopilot_state(sim), sim.stats.messages_in))
+            states.append((autopilot_state(sim), sim.stats.messages_in))
     assert states[0] == states[1]
     assert states[0][0]["armed"]  # the valid frames did something: the comparison is not empty

@@ -1,8 +1,8 @@
-"""Link faults on UDP (issue 5): the closed loop through ``tests.linkfault.LinkFaultProxy``.
+"""Link faults on UDP (issue 5): the closed loop through ``tests.support.linkfault.LinkFaultProxy``.
 
 ``lrauv sim`` runs as a process, the executive in a thread, and the proxy between
 them drops, duplicates, reorders and delays datagrams, or cuts the link. All fault
-times are vehicle seconds (see ``tests/linkfault.py``). With 30 % loss, 5 %
+times are vehicle seconds (see ``tests/support/linkfault.py``). With 30 % loss, 5 %
 duplication, reordering and 2 s latency spikes both ways the vehicle still reaches
 its goal; a silence beyond ``link_loss_timeout_s`` makes the executive ask for its
 ``on_breach`` mode, and a short outage or spike does not. Every process and thread a
@@ -21,9 +21,9 @@ from executive.helm import DEFAULT_RATES
 from executive.recorder import read_messages
 from executive.state import Phase
 from planner.contract.modes import SubMode
-from tests.helpers import assert_audit_clean, start_west_of_goal, wait_until
-from tests.linkfault import Faults, LinkFaultProxy
-from tests.test_closed_loop import ExecThread, Sim
+from tests.support.helpers import assert_audit_clean, start_west_of_goal, wait_until
+from tests.support.linkfault import Faults, LinkFaultProxy
+from tests.support.loop_rig import ExecThread, Sim
 from planner.shore.demo import read_track
 
 pytestmark = pytest.mark.slow

@@ -27,7 +27,8 @@ from executive.recorder import Topic, read_messages
 from planner.contract.settings import Goal
 from planner.shore.demo import stop_process, wait_ready
 
-from tests.helpers import DEMO_MISSION, REPO, assert_audit_clean, plan_for, start_west_of_goal, wait_until
+from tests.support import REPO
+from tests.support.helpers import DEMO_MISSION, assert_audit_clean, plan_for, start_west_of_goal, wait_until
 
 pytestmark = pytest.mark.slow
 

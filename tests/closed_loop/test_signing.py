@@ -2,7 +2,7 @@
 
 The pure parts (``executive.signing``) are checked against frames signed by pymavlink's
 own ``sign_packet``, and ours against pymavlink's own check, so the two implementations
-cross-check each other. The live tests reuse ``tests.test_uploads.Live`` (a simulated
+cross-check each other. The live tests reuse ``tests.support.live_rig.Live`` (a simulated
 vehicle and an executive over real UDP on ephemeral ports) with a key generated here.
 """
 
@@ -47,8 +47,8 @@ from planner.contract.mission import load_mission  # noqa: E402
 from planner.shore.mission_client import upload_goals  # noqa: E402
 from planner.contract.mission import goals_to_items  # noqa: E402
 
-from tests.helpers import DEMO_MISSION, plan_for, start_west_of_goal  # noqa: E402
-from tests.test_uploads import Live  # noqa: E402
+from tests.support.helpers import DEMO_MISSION, plan_for, start_west_of_goal  # noqa: E402
+from tests.support.live_rig import Live  # noqa: E402
 
 KEY = SigningKey(bytes(range(1, 33)))
 OTHER = SigningKey(bytes(range(101, 133)))

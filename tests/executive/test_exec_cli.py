@@ -10,10 +10,9 @@ from pathlib import Path
 import pytest
 
 from executive.recorder import LogError, read_messages
-from tests.helpers import start_west_of_goal, wait_until
-from tests.test_closed_loop import LRAUV, Sim
-
-REPO = Path(__file__).resolve().parents[1]
+from tests.support import REPO
+from tests.support.helpers import start_west_of_goal, wait_until
+from tests.support.loop_rig import LRAUV, Sim
 
 
 def _lrauv(*args: str) -> subprocess.CompletedProcess[str]:

@@ -2,7 +2,7 @@
 
 No sockets here: ``helm.step`` is a pure function of the helm state, the vehicle
 state and the table (issue 2, point 2). The same behaviour over real UDP is in
-tests/test_closed_loop.py.
+tests/closed_loop/test_closed_loop.py.
 """
 
 from __future__ import annotations

@@ -17,8 +17,8 @@ import pytest
 from mcap.reader import make_reader
 
 from executive.recorder import LogError, Recorder, Topic, read_messages, recover
+from tests.support import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 
 STATE = {"time_s": 12.5, "lat_deg": 33.6, "lon_deg": -118.4, "depth_m": 20.0, "heading_deg": 91.0, "mode": 4,
          "armed": True, "position_ok": True, "battery_pct": 80.0, "energy_used_wh": 1.5, "heartbeat_s": 12.0}

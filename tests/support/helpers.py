@@ -8,7 +8,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.support import REPO
+
 DEMO_MISSION = REPO / "missions" / "demo.yaml"
 
 

@@ -1,6 +1,6 @@
 """MAVLink input fuzzing: corrupt frames, and harnesses that feed them to the executive and the simulator.
 
-Used by tests/test_fuzz_mavlink.py (tens of thousands of frames, and hypothesis)
+Used by tests/closed_loop/test_fuzz_mavlink.py (tens of thousands of frames, and hypothesis)
 and bench/bench_fuzz.py (a million). Frames go in as real datagrams over UDP on
 127.0.0.1 to the real input paths: ``Executive._drain`` and ``Simulator._poll``,
 called in this thread so that a run is deterministic and its effects can be
@@ -228,3 +228,11 @@ class ExecutiveHarness:
     def close(self) -> None:
         self.executive.close()
         self.sink.close()
+
+
+def autopilot_state(sim: Any) -> dict[str, Any]:
+    """What a ``Simulator``'s autopilot would act on next: mode, arming, setpoint, holds, deadlines, failsafe."""
+    ap = sim.autopilot
+    return {"mode": ap.mode, "armed": ap.armed, "setpoint": ap.setpoint, "guided": ap._guided,
+            "hold": ap._hold_depth_m, "deadline": ap._velocity_deadline_s, "heartbeat": ap._last_heartbeat_s,
+            "failsafe": ap.failsafe_active}

@@ -13,10 +13,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from tests.helpers import sim_cli
+from tests.support.helpers import sim_cli
 from vehicle_sim.world import TruthSequence, World, WorldError, load_truth
 
-REPO = Path(__file__).resolve().parents[1]
 HOURS = 30
 ISSUE_1_S = 6 * 3600.0  # SyntheticSettings.issue_interval_h
 LAT, LON = 33.45, -118.10  # open water in the synthetic forecast

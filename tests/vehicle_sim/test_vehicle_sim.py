@@ -41,9 +41,9 @@ from vehicle_sim.dynamics import (  # noqa: E402
 from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
-from tests.helpers import sim_cli  # noqa: E402
+from tests.support import REPO  # noqa: E402
+from tests.support.helpers import sim_cli  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
 WATER = (33.45, -118.10)  # lat, lon of open water in the synthetic forecast
 LAND = (33.69, -117.71)  # the north-east corner: coast
 QUIET = VehicleParams(position_noise_m=0.0, heading_noise_deg=0.0, depth_noise_m=0.0)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.conftest import REPO
+from tests.support import REPO
 
 LRAUV = str(Path(sys.executable).parent / "lrauv")
 GRID = ["--bbox=-118.26,33.30,-117.70,33.70", "--nx=29", "--ny=21", "--depths=0,5,10,15"]

@@ -8,7 +8,7 @@ import pytest
 
 from planner.contract.errors import MissionError
 from planner.contract.mission import load_mission
-from tests.conftest import REPO
+from tests.support import REPO
 
 MISSIONS = sorted((REPO / "missions").glob("*.yaml"))
 

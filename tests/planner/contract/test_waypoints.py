@@ -31,8 +31,8 @@ from planner.contract.waypoints import (  # noqa: E402
     write_wpl,
 )
 from planner.cli.waypoints import add_parser, replace_goals, run  # noqa: E402
+from tests.support import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 DEMO = REPO / "missions" / "demo.yaml"
 HOME = {"home_lat_deg": 33.45, "home_lon_deg": -118.1}
 

@@ -24,9 +24,10 @@ from planner.forecast import Forecast, describe, nearest_time_index, open_foreca
 from planner.forecast.resample import resample
 from planner.grid import Grid
 from planner.contract.geodesy import BBox
+from tests.support import REPO
 
 DATA_DIR = Path(
-    os.environ.get("LRAUV_OCEAN_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data" / "ocean"
+    os.environ.get("LRAUV_OCEAN_DATA") or REPO.parent / "shared" / "data" / "ocean"
 )
 HAVE_DATA = DATA_DIR.is_dir()
 needs_data = pytest.mark.skipif(

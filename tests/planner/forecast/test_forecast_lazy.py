@@ -34,8 +34,8 @@ from planner.forecast import (
 from planner.grid import Grid
 from planner.contract.geodesy import BBox
 from planner.forecast.resample import resample
+from tests.support import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 DATA_DIR = Path(os.environ.get("LRAUV_OCEAN_DATA") or REPO.parent / "shared" / "data" / "ocean")
 needs_data = pytest.mark.skipif(not DATA_DIR.is_dir(), reason=f"ocean data folder missing: {DATA_DIR}")
 DEPTHS = [0.0, 2.5, 5.0, 12.5, 15.0, 20.0]  # between levels, on levels, below the last level (land)
@@ -528,7 +528,7 @@ def test_peak_memory_stays_below_the_files_velocities(tmp_path: Path) -> None:
 
 
 def _broken_cases() -> list[Any]:
-    from tests.test_broken_files import NETCDF_CASES
+    from tests.support.broken_netcdf import NETCDF_CASES
 
     return [pytest.param(build, expected, id=name) for name, build, expected in NETCDF_CASES]
 
@@ -536,7 +536,7 @@ def _broken_cases() -> list[Any]:
 @pytest.fixture(scope="module")
 def small_base(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from planner.forecast.synthetic.scb import write_synthetic
-    from tests.test_broken_files import SMALL
+    from tests.support.broken_netcdf import SMALL
 
     return write_synthetic(tmp_path_factory.mktemp("base") / "small.nc", SMALL)
 

@@ -12,7 +12,7 @@ from planner.contract.geodesy import BBox
 from planner.contract.settings import Costs, Goal, PlanSettings
 from planner.paper.solve import solve
 from planner.paper.transitions import build_transitions
-from tests.paper_reference import INF, PaperModel, algorithm1_optimistic, value_iteration
+from tests.support.paper_reference import INF, PaperModel, algorithm1_optimistic, value_iteration
 
 
 def random_case(seed: int, *, nx=6, ny=5, layers=2, land=0.2, lateral=True):

@@ -22,7 +22,7 @@ from planner.contract.errors import MissionError, TableError
 from planner.contract.mission import Vehicle, load_mission
 from planner.contract.settings import PhysicalSettings
 from planner.contract.table import PolicyTable
-from tests.conftest import REPO
+from tests.support import REPO
 from planner.contract.vehicle import VehicleParams
 
 LRAUV = str(Path(sys.executable).parent / "lrauv")

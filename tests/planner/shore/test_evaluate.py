@@ -54,8 +54,8 @@ from vehicle_sim.dynamics import Setpoint, SetpointKind
 from planner.contract.geodesy import M_PER_DEG_LAT
 from planner.contract.vehicle import VehicleParams, power_draw_w
 from vehicle_sim.world import World
+from tests.support import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 GYRE_MISSION = REPO / "missions" / "eval-double-gyre.yaml"
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 RUN_COLUMNS = ["method", "start", "outcome", "time_s", "energy_wh", "predicted_wh", "marked_reachable"]

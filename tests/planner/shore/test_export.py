@@ -25,7 +25,6 @@ from planner.shore.replay.export import CSV_COLUMNS, GPX_NAMESPACE, write_csv, w
 from executive.recorder import LogError, Recorder, Topic
 from planner.contract.geodesy import EARTH_RADIUS_M
 
-REPO = Path(__file__).resolve().parents[1]
 GPX = f"{{{GPX_NAMESPACE}}}"
 
 def copy_log(src: Path, dst: Path, keep: Callable[[LogMessage], bool]) -> Path:

@@ -27,8 +27,8 @@ import pytest
 from mcap.reader import make_reader
 
 from executive.recorder import Recorder, Topic, read_messages, recover
+from tests.support import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 NODE_DIR = REPO / "tests" / "node"
 SCRIPT = NODE_DIR / "read_mcap.mjs"
 PACKAGES = ("@mcap/core", "@foxglove/wasm-zstd")
@@ -319,7 +319,7 @@ def test_node_reader_refuses_a_file_that_is_not_mcap(tmp_path):
 @pytest.mark.slow
 def test_node_reads_the_log_of_a_closed_loop_run(demo_plan, synthetic_forecast, tmp_path):
     """``lrauv sim`` and ``lrauv exec`` over UDP to the goal; Node reads the executive's log as Python does."""
-    from tests.helpers import start_west_of_goal
+    from tests.support.helpers import start_west_of_goal
     from planner.shore.demo import run_closed_loop
 
     table_path = tmp_path / "demo.lrpt"

@@ -18,9 +18,9 @@ from planner.shore.plots import default_start, plot_all, plot_flow_fields, plot_
 from planner.contract.settings import Goal, PlanSettings
 from planner.paper.solve import solve
 from planner.paper.transitions import build_transitions
+from tests.support import REPO
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-REPO = Path(__file__).resolve().parents[1]
 
 
 def vortex_case(nx: int = 12, ny: int = 9):

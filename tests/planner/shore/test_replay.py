@@ -25,7 +25,7 @@ from executive.recorder import LogError, RecordStream, Recorder, Topic, read_mes
 from planner.shore.replay.summary import distance_to_polyline_m, summarise
 from planner.cli import main as lrauv
 
-from tests.helpers import start_west_of_goal
+from tests.support.helpers import start_west_of_goal
 
 def _rewrite(src: Path, dst: Path, transform: Callable[[str, Message], bytes | None] = lambda t, m: m.data, *,
              extra_channel: str | None = None, attachments: Callable[[Attachment], bytes] | None = None) -> Path:
@@ -171,7 +171,7 @@ def test_the_audit_reports_a_tampered_decision(dive_log, tmp_path, capsys):
 
 def test_the_audit_notices_a_table_that_is_not_the_one_used(dive_log, tmp_path, synthetic_forecast, demo_plan):
     from planner.contract.settings import Goal
-    from tests.helpers import plan_for
+    from tests.support.helpers import plan_for
 
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)  # the same grid, another goal
     other = plan_for(synthetic_forecast, Goal(lon_deg=lon, lat_deg=lat, depth_m=0.0)).table.to_bytes()
