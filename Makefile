@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 LRAUV  := $(VENV)/bin/lrauv
 STAMP  := $(VENV)/.installed
 OUT    ?= out/demo
-# The TypeScript MCAP reader (@mcap/core) that tests/test_mcap_node.py reads the logs with; installed
+# The TypeScript MCAP reader (@mcap/core) that tests/planner/shore/test_mcap_node.py reads the logs with; installed
 # from tests/node/package-lock.json when node and npm are on PATH, else those tests skip.
 NODE_DIR   := tests/node
 NODE_STAMP := $(NODE_DIR)/node_modules/.installed
@@ -52,13 +52,13 @@ demo: $(STAMP)
 $(NODE_STAMP): $(NODE_DIR)/package.json $(NODE_DIR)/package-lock.json
 	@echo "npm ci --prefix $(NODE_DIR) --no-audit --no-fund"
 	@if npm ci --prefix $(NODE_DIR) --no-audit --no-fund; then touch $@; else rm -rf $(NODE_DIR)/node_modules; \
-	  echo "WARNING: npm ci failed: @mcap/core is not installed and tests/test_mcap_node.py will skip"; fi
+	  echo "WARNING: npm ci failed: @mcap/core is not installed and tests/planner/shore/test_mcap_node.py will skip"; fi
 
 ifeq ($(HAVE_NODE),yes)
 node: $(NODE_STAMP)
 else
 node:
-	@echo "node or npm not on PATH: not installing @mcap/core; tests/test_mcap_node.py will skip"
+	@echo "node or npm not on PATH: not installing @mcap/core; tests/planner/shore/test_mcap_node.py will skip"
 endif
 
 # The type check is part of the tests: mypy and the stubs come with the test extra; settings in pyproject.toml.

@@ -1,9 +1,9 @@
 """MAVLink fuzzing at scale: a million frames into the executive and a million into the simulator.
 
-Not a test (tests/test_fuzz_mavlink.py runs the same checks on tens of thousands).
+Not a test (tests/closed_loop/test_fuzz_mavlink.py runs the same checks on tens of thousands).
 Every frame is a real datagram over UDP on 127.0.0.1 into the real input path
 (``Executive._drain``, ``Simulator._poll``), through the harness in
-tests/mavfuzz.py. Four runs, about ``--frames`` each (default 520,000: over a million for each side):
+tests/support/mavfuzz.py. Four runs, about ``--frames`` each (default 520,000: over a million for each side):
 
 1. executive, idle (no autopilot heard yet), invalid frames only: it must send
    nothing, count no message in and keep its state;
@@ -38,9 +38,10 @@ sys.path.insert(0, str(REPO))
 from executive.helm import HelmState  # noqa: E402
 from executive.state import VehicleState  # noqa: E402
 from planner.contract.table import PolicyTable  # noqa: E402
-from tests.mavfuzz import (  # noqa: E402
+from tests.support.mavfuzz import (  # noqa: E402
     ExecutiveHarness,
     autopilot_frames,
+    autopilot_state,
     executive_frames,
     invalid_frames,
     noisy_stream,
@@ -66,7 +67,7 @@ class Memory:
 
 def table_and_truth(work: Path) -> tuple[PolicyTable, Path]:
     from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
-    from tests.helpers import plan_for
+    from tests.support.helpers import plan_for
 
     truth = write_synthetic(work / "truth.nc", SyntheticSettings(seed=0, hours=24))
     return plan_for(truth).table, truth
@@ -113,7 +114,6 @@ def simulator(truth: Path, n: int, rng: random.Random, *, noisy: bool) -> None:
 
     from vehicle_sim.endpoint import SimConfig, Simulator
     from vehicle_sim.world import World
-    from tests.test_fuzz_mavlink import _autopilot_state
 
     world = World.load(truth)
     config = SimConfig(start_lon_deg=-118.0, start_lat_deg=33.5, port=0)
@@ -128,7 +128,7 @@ def simulator(truth: Path, n: int, rng: random.Random, *, noisy: bool) -> None:
         mem = Memory()
         with Simulator(world, config) as sim, socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
             sender.bind(("127.0.0.1", 0))
-            before = _autopilot_state(sim)
+            before = autopilot_state(sim)
             t0 = time.perf_counter()
             for k, data in enumerate(frames):
                 sender.sendto(data, (sim.host, sim.port))
@@ -136,7 +136,7 @@ def simulator(truth: Path, n: int, rng: random.Random, *, noisy: bool) -> None:
                     sim._poll()
                 mem(k)
             sim._poll()
-            results[name] = (before, _autopilot_state(sim), sim.stats.messages_in, len(frames),
+            results[name] = (before, autopilot_state(sim), sim.stats.messages_in, len(frames),
                              time.perf_counter() - t0, mem)
     before, after, messages_in, count, wall, mem = results["noisy"]
     if noisy:

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.support import REPO
+
 SHARED_OCEAN = Path(os.environ.get("LRAUV_OCEAN_DATA", REPO.parent / "shared" / "data" / "ocean"))
 
 
@@ -23,7 +24,7 @@ def synthetic_forecast(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def demo_plan(synthetic_forecast):
     """The demo mission's plan on the synthetic forecast (the paper's 29 x 21 x 4 grid)."""
-    from tests.helpers import plan_for
+    from tests.support.helpers import plan_for
 
     return plan_for(synthetic_forecast)
 
@@ -40,7 +41,7 @@ def dive_log(demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
     ``lrauv sim`` and ``lrauv exec`` as processes over UDP on 127.0.0.1 (``make demo``'s path), from two
     cells west of the demo goal to the goal at 1000x: a few seconds of wall time.
     """
-    from tests.helpers import DEMO_MISSION, start_west_of_goal
+    from tests.support.helpers import DEMO_MISSION, start_west_of_goal
     from planner.shore.demo import run_closed_loop
 
     out = tmp_path_factory.mktemp("dive")

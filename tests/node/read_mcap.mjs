@@ -1,6 +1,6 @@
 #!/usr/bin/env node
 // Reads an MCAP log with the TypeScript reader (@mcap/core, Foxglove's own implementation) and
-// prints what it saw as one JSON object on stdout, for tests/test_mcap_node.py to compare with
+// prints what it saw as one JSON object on stdout, for tests/planner/shore/test_mcap_node.py to compare with
 // what executive/recorder.py wrote. An independent reader: none of the Python mcap package.
 //
 //   node read_mcap.mjs [--stream] [--messages] [--piece BYTES] LOG.mcap

@@ -1,0 +1,279 @@
+"""``lrauv replay``: the dive summary, the decision audit and bad or damaged logs (issue 4).
+
+The log is a real one, shared with the other replay tests (``dive_log`` in
+conftest.py): ``lrauv sim`` and ``lrauv exec`` as processes over UDP to the goal.
+Damaged and tampered copies are written record by record with the ``mcap`` library.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+from mcap.writer import Writer
+
+from planner.shore.replay.audit import audit
+from planner.shore.replay.dive import load_dive, path_length_m
+from planner.shore.replay.divelog import open_dive
+from executive.recorder import LogError, RecordStream, Recorder, Topic, read_messages, recover
+from planner.shore.replay.summary import distance_to_polyline_m, summarise
+from planner.cli import main as lrauv
+
+from tests.support.helpers import start_west_of_goal
+
+def _rewrite(src: Path, dst: Path, transform: Callable[[str, Message], bytes | None] = lambda t, m: m.data, *,
+             extra_channel: str | None = None, attachments: Callable[[Attachment], bytes] | None = None) -> Path:
+    """Copy ``src`` record by record, each message's data through ``transform`` (None drops it)."""
+    with open(src, "rb") as f, open(dst, "wb") as out:
+        writer: Writer | None = None
+        topics: dict[int, str] = {}
+        schemas: dict[int, int] = {0: 0}
+        channels: dict[int, int] = {}
+        extra_id = None
+        for r in RecordStream(f, src.stat().st_size):
+            if isinstance(r, Header):
+                writer = Writer(out)
+                writer.start(r.profile, r.library)
+                if extra_channel is not None:
+                    schema = writer.register_schema("other.Thing", "jsonschema", b"{}")
+                    extra_id = writer.register_channel(extra_channel, "json", schema)
+            elif isinstance(r, Schema):
+                assert writer is not None
+                schemas[r.id] = writer.register_schema(r.name, r.encoding, r.data)
+            elif isinstance(r, Channel):
+                assert writer is not None
+                channels[r.id] = writer.register_channel(r.topic, r.message_encoding, schemas[r.schema_id],
+                                                         dict(r.metadata))
+                topics[r.id] = r.topic
+            elif isinstance(r, Message):
+                assert writer is not None
+                data = transform(topics[r.channel_id], r)
+                if data is not None:
+                    writer.add_message(channels[r.channel_id], r.log_time, data, r.publish_time, r.sequence)
+                if extra_id is not None and r.sequence % 100 == 0:
+                    writer.add_message(extra_id, r.log_time, b'{"x":1}', r.publish_time, r.sequence)
+            elif isinstance(r, Attachment):
+                assert writer is not None
+                data = r.data if attachments is None else attachments(r)
+                writer.add_attachment(r.create_time, r.log_time, r.name, r.media_type, data)
+            elif isinstance(r, Metadata):
+                assert writer is not None
+                writer.add_metadata(r.name, dict(r.metadata))
+        assert writer is not None
+        writer.finish()
+    return dst
+
+
+def _decisions(path: Path) -> list[dict]:
+    """The logged decisions in the order they were made (file order)."""
+    return [m.payload for m in open_dive(path).messages([Topic.DECISION])]
+
+
+# -- the summary -------------------------------------------------------------------------
+
+
+def test_replay_prints_the_dive_summary_and_the_audit_finds_no_difference(dive_log, capsys):
+    code = lrauv(["replay", str(dive_log)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    decisions = _decisions(dive_log)
+    assert f"decisions  {len(decisions):,}" in out
+    assert f"audit      {len(decisions):,} decisions run again with 1 logged table(s), 0 swap(s): no difference" in out
+    assert "goal 0     reached at" in out and "NOT reached" not in out
+    assert "failsafes  0 (none)" in out
+    assert "complete (" in out
+    # The planning forecast is found beside the table by its identity: the nominal path is known.
+    assert "deviation  largest from the nominal path" in out, out
+
+
+def test_summary_figures_add_up_to_the_log(dive_log):
+    dive = load_dive(open_dive(dive_log))
+    s = summarise(dive)
+    decisions = _decisions(dive_log)
+    assert s.decisions == len(decisions) == sum(s.decisions_by_action.values())
+    assert s.action_starts == {a: n for a, n in _starts(decisions).items()}
+    # Every second of the dive and every watt-hour is put against exactly one action.
+    span_s = max(d["time_s"] for d in decisions) - decisions[0]["time_s"]
+    assert math.isclose(sum(s.time_by_action_s.values()), span_s, rel_tol=1e-9) and s.vehicle_s == span_s
+    states = [p for _, _, p in read_messages(dive_log, [Topic.STATE.value]) if p["energy_used_wh"] is not None]
+    assert s.energy_used_wh is not None and s.energy_used_wh > 0
+    assert math.isclose(sum(s.energy_by_action_wh.values()), s.energy_used_wh, rel_tol=1e-9)
+    assert s.energy_used_wh <= states[-1]["energy_used_wh"] - states[0]["energy_used_wh"] + 1e-9
+    lat = np.array([d["lat_deg"] for d in decisions])
+    lon = np.array([d["lon_deg"] for d in decisions])
+    assert s.distance_m == pytest.approx(path_length_m(lat, lon)) and s.distance_m > 1000.0
+    reached = [d for d in decisions if d["situation"] == "at_goal"]
+    assert [g.time_s for g in s.goals_reached] == [reached[0]["time_s"]]
+
+
+def _starts(decisions: list[dict]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for d in decisions:
+        if d["changed"]:
+            label = d["action"] or d["situation"].upper()
+            out[label] = out.get(label, 0) + 1
+    return out
+
+
+def test_path_length_and_distance_to_a_polyline_by_hand():
+    # One minute of latitude is 1852 m on the sphere of radius 6371 km: 1853.25 m.
+    minute_m = 6371000.0 * math.radians(1 / 60)
+    assert path_length_m(np.array([33.0, 33.0 + 1 / 60, math.nan, 33.0 + 2 / 60]), np.array([-118.0] * 4)) == \
+        pytest.approx(2 * minute_m)
+    lat = np.array([33.0, 33.0 + 1 / 60, 33.0])
+    lon = np.array([-118.0, -118.0, -118.0 + 2 / 60])
+    d = distance_to_polyline_m(lat, lon, np.array([33.0, 33.0]), np.array([-118.0, -118.0 + 1 / 60]))
+    assert d[0] == pytest.approx(0.0, abs=1e-6)
+    assert d[1] == pytest.approx(minute_m, rel=1e-6)  # straight above the first vertex
+    assert d[2] == pytest.approx(minute_m * math.cos(math.radians(33.0)), rel=1e-3)  # beyond the end: to the end
+
+
+def test_without_the_planning_forecast_the_deviation_says_why(dive_log, tmp_path, capsys):
+    wrong = tmp_path / "other.nc"
+    wrong.write_bytes(b"not the forecast")
+    code = lrauv(["replay", str(dive_log), "--forecast", str(wrong), "--no-audit"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "deviation  unknown: the planning forecast sha256:" in out and "other.nc" in out
+    assert "audit" not in out
+
+
+# -- the audit ------------------------------------------------------------------------------
+
+
+def test_the_audit_reports_a_tampered_decision(dive_log, tmp_path, capsys):
+    decisions = _decisions(dive_log)
+    victim = next(n for n, d in enumerate(decisions) if d["action"] == "FORWARD" and n > 10)
+    seen = {"n": -1}
+
+    def tamper(topic: str, m: Message) -> bytes:
+        if topic != Topic.DECISION.value:
+            return m.data
+        seen["n"] += 1
+        if seen["n"] != victim:
+            return m.data
+        return json.dumps({**json.loads(m.data), "action": "DRIFT"}).encode()
+
+    bad = _rewrite(dive_log, tmp_path / "tampered.mcap", tamper)
+    result = audit(open_dive(bad))
+    assert result.decisions == len(decisions)
+    assert [m.time_s for m in result.mismatches] == [decisions[victim]["time_s"]]
+    assert result.mismatches[0].logged["action"] == "DRIFT" and result.mismatches[0].audited["action"] == "FORWARD"
+    assert lrauv(["replay", str(bad)]) == 1
+    assert "1 DIFFERENT" in capsys.readouterr().out
+
+
+def test_the_audit_notices_a_table_that_is_not_the_one_used(dive_log, tmp_path, synthetic_forecast, demo_plan):
+    from planner.contract.settings import Goal
+    from tests.support.helpers import plan_for
+
+    lon, lat = start_west_of_goal(demo_plan.table, cells=6)  # the same grid, another goal
+    other = plan_for(synthetic_forecast, Goal(lon_deg=lon, lat_deg=lat, depth_m=0.0)).table.to_bytes()
+    bad = _rewrite(dive_log, tmp_path / "other-table.mcap", attachments=lambda a: other)
+    result = audit(open_dive(bad))
+    assert not result.clean and result.decisions == len(_decisions(dive_log))
+
+
+def test_the_audit_notices_a_dropped_decision(dive_log, tmp_path):
+    count = {"n": 0}
+
+    def drop_one(topic: str, m: Message) -> bytes | None:
+        if topic == Topic.DECISION.value:
+            count["n"] += 1
+            if count["n"] == 50:
+                return None
+        return m.data
+
+    result = audit(open_dive(_rewrite(dive_log, tmp_path / "dropped.mcap", drop_one)))
+    assert result.mismatches  # every decision after the gap is paired with the wrong one
+    assert result.mismatches[0].logged is not None and result.mismatches[0].audited is not None
+
+
+# -- damaged and foreign files ---------------------------------------------------------------------
+
+
+def test_a_truncated_log_replays_up_to_the_cut_and_says_where_it_ends(dive_log, tmp_path, capsys):
+    data = dive_log.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * 0.6)])
+    recovered = recover(cut, tmp_path / "recovered.mcap")
+    expected = _decisions(tmp_path / "recovered.mcap")
+    assert 0 < len(expected) < len(_decisions(dive_log))
+    code = lrauv(["replay", str(cut)])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert f"TRUNCATED: the writer did not finish (killed?); read up to byte {recovered.truncated_at_byte:,}" in out
+    assert f"decisions  {len(expected):,}" in out
+    assert f"audit      {len(expected):,} decisions run again" in out and "no difference" in out
+
+
+def test_a_log_cut_inside_the_header_is_refused_clearly(dive_log, tmp_path, capsys):
+    cut = tmp_path / "head.mcap"
+    cut.write_bytes(dive_log.read_bytes()[:12])
+    assert lrauv(["replay", str(cut)]) == 2
+    err = capsys.readouterr().err
+    assert str(cut) in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"", "empty file"),
+    (b"PK\x03\x04 this is a zip file", "not an MCAP file"),
+    (b"\x89MCA", "truncated inside the MCAP magic"),
+])
+def test_a_file_that_is_not_mcap_gets_a_clear_message(tmp_path, capsys, content, words):
+    path = tmp_path / "log.mcap"
+    path.write_bytes(content)
+    assert lrauv(["replay", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and str(path) in err and "Traceback" not in err
+
+
+def test_a_missing_log_gets_a_clear_message(tmp_path, capsys):
+    assert lrauv(["replay", str(tmp_path / "nowhere.mcap")]) == 2
+    err = capsys.readouterr().err
+    assert "nowhere.mcap: cannot read" in err and "Traceback" not in err
+
+
+def test_unknown_channels_are_named_and_skipped(dive_log, tmp_path, capsys):
+    mixed = _rewrite(dive_log, tmp_path / "mixed.mcap", extra_channel="/payload/ctd")
+    log = open_dive(mixed)
+    assert log.unknown["/payload/ctd"] > 0
+    code = lrauv(["replay", str(mixed), "--no-audit"])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert f"ignored    channels this version does not read: /payload/ctd ({log.unknown['/payload/ctd']:,} messages)" in out
+
+
+def test_an_mcap_file_of_someone_else_is_refused_clearly(tmp_path, capsys):
+    path = tmp_path / "ros.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f)
+        w.start("ros2", "someone else")
+        channel = w.register_channel("/tf", "cdr", w.register_schema("tf2_msgs/TFMessage", "ros2msg", b""))
+        w.add_message(channel, 1, b"\x00\x01", 1)
+        w.finish()
+    assert lrauv(["replay", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "no lrauv executive channel" in err and "/tf (cdr) (1)" in err and "Traceback" not in err
+
+
+def test_a_log_without_decisions_is_refused_clearly(tmp_path, capsys):
+    path = tmp_path / "idle.mcap"
+    with Recorder(path) as rec:
+        rec.log(1.0, "info", "autopilot heartbeat received")
+    assert lrauv(["replay", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert "holds no decision" in captured.err and "Traceback" not in captured.err
+
+
+def test_a_log_from_before_the_audit_says_it_cannot_be_audited(dive_log):
+    log = open_dive(dive_log)
+    old = dataclasses.replace(log, metadata={k: v for k, v in log.metadata.items() if k != "helm"})
+    with pytest.raises(LogError, match="no 'helm' metadata"):
+        audit(old)

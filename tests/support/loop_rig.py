@@ -1,0 +1,61 @@
+"""The closed loop's two sides for the tests: ``lrauv sim`` as a child process, the executive in a thread."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from executive.helm import HelmConfig
+from executive.loop import ExecConfig, Executive
+from planner.shore.demo import stop_process
+from vehicle_sim.cli import wait_ready
+
+LRAUV = [sys.executable, "-m", "planner.cli"]
+SPEEDUP = 400.0
+
+
+class Sim:
+    """``lrauv sim`` as a child process on an ephemeral port."""
+
+    def __init__(self, forecast: Path, start: tuple[float, float], *extra: str, track: Path | None = None) -> None:
+        cmd = [*LRAUV, "sim", "--forecast", str(forecast), "--start", f"{start[0]},{start[1]}", "--listen", "127.0.0.1:0",
+               "--speedup", str(SPEEDUP), "--seed", "1", *extra]
+        if track is not None:
+            cmd += ["--track", str(track)]
+        self.proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            self.port = wait_ready(self.proc)
+        except Exception:
+            self.stop()
+            raise
+
+    def stop(self) -> int:
+        stop_process(self.proc)
+        return self.proc.returncode
+
+
+class ExecThread:
+    def __init__(self, table, port: int, log: Path, **helm) -> None:  # type: ignore[no-untyped-def]
+        config = ExecConfig(link=f"udpout:127.0.0.1:{port}", log_path=log, exit_on_arrival=True, linger_s=20.0,
+                            max_wall_s=90.0, helm=HelmConfig(**helm))
+        self.executive = Executive(config, table)
+        self.stop_event = threading.Event()
+        self.summary = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        self.summary = self.executive.run(self.stop_event)
+
+    def join(self, timeout: float = 120.0):  # type: ignore[no-untyped-def]
+        self.thread.join(timeout)
+        if self.thread.is_alive():
+            self.stop_event.set()
+            self.thread.join(10)
+        return self.summary
+
+    def stop(self):  # type: ignore[no-untyped-def]
+        self.stop_event.set()
+        return self.join(10)
