@@ -222,6 +222,11 @@ def test_the_log_has_every_run_element(rig):
     ap.expect("SET_POSITION_TARGET_LOCAL_NED")
     for _ in range(3):
         _go(ap, table, fwd)
+    # The positions are in flight over UDP: stop once the executive has acted on them, not before
+    # (on a busy machine its thread can be a few datagrams behind the script).
+    deadline = time.monotonic() + 20.0
+    while rig.executive._counts["decisions"] < 3 and time.monotonic() < deadline:
+        time.sleep(0.01)
     summary = rig.stop()
     assert summary.decisions >= 3
     log_path = rig.log_path
