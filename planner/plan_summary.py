@@ -37,17 +37,22 @@ def model_lines(result: PlanResult) -> list[str]:
         c = s.costs
         return [f"model      paper, {s.criterion}, {s.uncertainty} uncertainty; costs drift {c.drift}, forward"
                 f" {c.forward}, rotate {c.rotate}, glide {c.glide}"]
+    from planner.physical.model import PhysicalModel  # loaded already: the pipeline that made the result imports it
+    from planner.physical.solve import PhysicalSolution
+
     m, sol, v = result.model, result.solution, s.vehicle
+    if not isinstance(m, PhysicalModel) or not isinstance(sol, PhysicalSolution):
+        raise TypeError(f"a physical plan has a {type(m).__name__} and a {type(sol).__name__}")
     lines = [
         (f"model      physical, {s.criterion}; costs in Wh (hotel {v.hotel_w:g} W, propulsion {v.propulsion_w:g} W"
          f" at {v.cruise_speed_m_s:g} m/s, buoyancy {v.buoyancy_w:g} W)"),
-        (f"samples    {m.n_pairs:,} state-actions, {m.samples_per_action} samples per action"  # type: ignore[union-attr]
+        (f"samples    {m.n_pairs:,} state-actions, {m.samples_per_action} samples per action"
          f" ({s.physical.start_points}x{s.physical.start_points} start points x {s.physical.error_members + 1}"
-         f" currents{f' x {m.members} forecast members' if m.members > 1 else ''}),"  # type: ignore[union-attr]
-         f" currents {m.refine}x finer than the grid"),  # type: ignore[union-attr]
+         f" currents{f' x {m.members} forecast members' if m.members > 1 else ''}),"
+         f" currents {m.refine}x finer than the grid"),
     ]
     if s.criterion == "expected":
-        lines.append(f"solve      policy iteration: {sol.iterations} iterations, residual {sol.residual_wh:.2g} Wh")  # type: ignore[union-attr]
+        lines.append(f"solve      policy iteration: {sol.iterations} iterations, residual {sol.residual_wh:.2g} Wh")
     return lines
 
 

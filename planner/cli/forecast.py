@@ -108,17 +108,25 @@ def settings_from_args(args: argparse.Namespace) -> Any:
     """``DoubleGyreSettings`` from ``lrauv forecast gyre``'s options; bad values raise ``PlannerError`` naming the option."""
     from planner.forecast.synthetic.double_gyre import DoubleGyreSettings
 
-    kwargs: dict[str, object] = {}
-    for name in ("peak_speed_m_s", "eps", "period_h", "phase_rad", "hours", "step_h", "spacing_deg", "issue_time"):
+    default = DoubleGyreSettings()  # the value of each option not given
+
+    def given(name: str) -> Any:  # argparse values are untyped; the settings check them
         value = getattr(args, name, None)
-        if value is not None:
-            kwargs[name] = value
+        return getattr(default, name) if value is None else value
+
+    west, south, east, north = default.west_deg, default.south_deg, default.east_deg, default.north_deg
     if getattr(args, "bbox", None) is not None:
-        kwargs.update(zip(("west_deg", "south_deg", "east_deg", "north_deg"), _floats(args.bbox, 4, "--bbox")))
+        west, south, east, north = _floats(args.bbox, 4, "--bbox")
+    depths = default.depths_m
     if getattr(args, "depths", None) is not None:
-        kwargs["depths_m"] = tuple(_floats(args.depths, None, "--depths"))
+        depths = tuple(_floats(args.depths, None, "--depths"))
     try:
-        return DoubleGyreSettings(**kwargs)  # type: ignore[arg-type]
+        return DoubleGyreSettings(
+            west_deg=west, south_deg=south, east_deg=east, north_deg=north, depths_m=depths,
+            spacing_deg=given("spacing_deg"), hours=given("hours"), step_h=given("step_h"),
+            issue_time=given("issue_time"), peak_speed_m_s=given("peak_speed_m_s"), eps=given("eps"),
+            period_h=given("period_h"), phase_rad=given("phase_rad"),
+        )
     except PlannerError as exc:
         field = getattr(exc, "field", None)  # the settings' errors carry the field they refuse
         if field is None:

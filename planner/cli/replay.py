@@ -105,7 +105,8 @@ def _plans(dive: Any, tables: dict[str, Any], forecast: Path | None) -> tuple[di
                 plans[seg.table_crc32] = None
         plan = plans[seg.table_crc32]
         if plan is not None:
-            nominal[index] = nominal_from(plan, tuple(int(x) for x in cells[valid][0]))  # type: ignore[arg-type]
+            layer, row, col, heading = (int(x) for x in cells[valid][0])  # the track's cells are (n, 4)
+            nominal[index] = nominal_from(plan, (layer, row, col, heading))
     note = "; ".join(dict.fromkeys(notes)) or None
     return {k: v for k, v in plans.items() if v is not None}, nominal, note
 

@@ -306,8 +306,7 @@ def nearest_time_index(forecast: Forecast | ForecastTimes, when: np.datetime64) 
             "choose the time step by position with --time-index"
         )
     try:
-        # numpy's stubs lack the (datetime64, unit) overload that the constructor accepts at run time
-        moment = np.datetime64(when, "ms")  # type: ignore[call-overload]
+        moment = np.datetime64(when, "ms")  # type: ignore[call-overload]  # numpy's stubs lack the (datetime64, unit) overload
     except (ValueError, TypeError) as exc:
         raise ForecastError(f"{forecast.source}: time: expected a numpy.datetime64; got {when!r}") from exc
     if np.isnat(moment):

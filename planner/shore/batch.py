@@ -18,9 +18,13 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import LrauvError, MissionError, ShoreError
+
+if TYPE_CHECKING:  # for the annotation only: this module loads no numpy
+    from planner.pipeline import PlanRequest
 
 MAX_FLEET_BYTES = 1 << 20
 
@@ -31,7 +35,7 @@ class BatchItem:
 
     vehicle: str
     goal_index: int
-    request: object  # planner.pipeline.PlanRequest (imported where used: this module loads no numpy)
+    request: PlanRequest
     out: Path
 
 
@@ -120,7 +124,7 @@ def plan_item(item: BatchItem) -> BatchResult:
 
     t = time.perf_counter()
     try:
-        result = make_plan(item.request)  # type: ignore[arg-type]
+        result = make_plan(item.request)
     except LrauvError as exc:
         return BatchResult(vehicle=item.vehicle, goal_index=item.goal_index, table=None, reachable=0,
                            water_states=0, plan_s=time.perf_counter() - t, error=str(exc))

@@ -21,8 +21,13 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from planner.contract.errors import LrauvError, ShoreError
+
+if TYPE_CHECKING:
+    from executive.signing import SigningKey
+    from planner.contract.mission import Mission
 
 GCS_SYSTEM, GCS_COMPONENT = 255, 190  # a ground station's usual MAVLink identity (MAVProxy, QGC)
 
@@ -77,7 +82,7 @@ def _silent(_text: str) -> None:
     pass
 
 
-def _signing(signing_key_file: Path | None, mission):  # type: ignore[no-untyped-def]
+def _signing(signing_key_file: Path | None, mission: Mission) -> tuple[SigningKey | None, int]:
     """The key to sign with (``signing_key_file`` first, then the mission's) and the link id, or (None, 0)."""
     from executive.signing import load_key
 
@@ -90,13 +95,13 @@ def _signing(signing_key_file: Path | None, mission):  # type: ignore[no-untyped
     return load_key(key_file=sg.key_file, passphrase_env=sg.passphrase_env, where=sg.where), link_id
 
 
-def _sign(conn, key, link_id: int) -> None:  # type: ignore[no-untyped-def]
+def _sign(conn: Any, key: SigningKey, link_id: int) -> None:  # conn: a pymavlink connection (pymavlink has no types)
     """Sign every frame; read only frames signed with ``key`` (pymavlink counts the others)."""
     conn.setup_signing(key.secret, sign_outgoing=True, link_id=link_id,
                        allow_unsigned_callback=lambda _mav, _msg_id: False)  # counted in reject_count, then dropped
 
 
-def _signing_diagnosis(conn, *, signed: bool) -> str:  # type: ignore[no-untyped-def]
+def _signing_diagnosis(conn: Any, *, signed: bool) -> str:  # conn: a pymavlink connection (no types)
     """What a silent executive probably means, from pymavlink's signing counters ("" when nothing to say)."""
     s = conn.mav.signing
     if not signed:  # sig_count counts signed frames even without a key
@@ -114,7 +119,7 @@ def _signing_diagnosis(conn, *, signed: bool) -> str:  # type: ignore[no-untyped
             " behind the vehicle's? (see its log)")
 
 
-def _plan_goal(mission, n: int, forecast: Path | None, out: Path, report: Callable[[str], None]) -> bytes:  # type: ignore[no-untyped-def]
+def _plan_goal(mission: Mission, n: int, forecast: Path | None, out: Path, report: Callable[[str], None]) -> bytes:
     """Plan goal ``n`` as ``lrauv plan MISSION --goal ... --forecast ...`` would, write the table to ``out``."""
     from dataclasses import replace
 
@@ -141,7 +146,7 @@ def _plan_goal(mission, n: int, forecast: Path | None, out: Path, report: Callab
     return data
 
 
-def _connect(address: str):  # type: ignore[no-untyped-def]
+def _connect(address: str) -> Any:  # a pymavlink connection: pymavlink has no types
     from executive.mavlink_bridge import open_link
 
     try:
@@ -150,8 +155,9 @@ def _connect(address: str):  # type: ignore[no-untyped-def]
         raise ShoreError(f"--to {address}: cannot open: {exc}") from None
 
 
-def _send(conn, mission, blobs: dict[int, bytes], *, target_system: int | None, target_component: int | None,  # type: ignore[no-untyped-def]
-          timeout_s: float, say: Callable[[str], None]) -> None:
+def _send(conn: Any, mission: Mission, blobs: dict[int, bytes], *, target_system: int | None,
+          target_component: int | None, timeout_s: float, say: Callable[[str], None]) -> None:
+    """Goals by the mission protocol, then each table by FTP; conn: a pymavlink connection (no types)."""
     from executive.mavlink_bridge import EXECUTIVE_COMPONENT, EXECUTIVE_SYSTEM
     from planner.contract.mission import goals_to_items
     from planner.shore.ftp_client import put_file
@@ -159,11 +165,11 @@ def _send(conn, mission, blobs: dict[int, bytes], *, target_system: int | None, 
 
     first = mission.goals[0].goal
     items = goals_to_items(mission.goals, home_lat_deg=first.lat_deg, home_lon_deg=first.lon_deg)
-    target = {"target_system": target_system or EXECUTIVE_SYSTEM,
-              "target_component": target_component or EXECUTIVE_COMPONENT}
-    upload_goals(conn, items, **target)
-    say(f"goals: {len(mission.goals)} accepted by system {target['target_system']} component {target['target_component']}")
+    system = target_system or EXECUTIVE_SYSTEM
+    component = target_component or EXECUTIVE_COMPONENT
+    upload_goals(conn, items, target_system=system, target_component=component)
+    say(f"goals: {len(mission.goals)} accepted by system {system} component {component}")
     for n in sorted(blobs):
         remote = f"/tables/goal-{n}.lrpt"
-        put_file(conn, blobs[n], remote, timeout_s=timeout_s, **target)
+        put_file(conn, blobs[n], remote, timeout_s=timeout_s, target_system=system, target_component=component)
         say(f"table for goal {n}: {len(blobs[n]):,} bytes accepted as {remote}")

@@ -51,7 +51,7 @@ import os
 import pathlib
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 import xarray as xr
@@ -92,20 +92,20 @@ class _ArgumentError(PlannerError):
         self.argument = argument
 
 
-def _is_int(value: object) -> bool:
+def _is_int(value: object) -> TypeGuard[int | np.integer[Any]]:
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 def _check_members(members: object) -> int:
-    if not (_is_int(members) and 1 <= members <= MAX_MEMBERS):  # type: ignore[operator]
+    if not (_is_int(members) and 1 <= members <= MAX_MEMBERS):
         raise _ArgumentError("members", f"ensemble: `members` must be an integer in 1..{MAX_MEMBERS}; got {members!r}")
-    return int(members)  # type: ignore[call-overload]
+    return int(members)
 
 
 def _check_non_negative_int(value: object, name: str) -> int:
-    if not (_is_int(value) and value >= 0):  # type: ignore[operator]
+    if not (_is_int(value) and value >= 0):
         raise _ArgumentError(name, f"ensemble: `{name}` must be an integer >= 0; got {value!r}")
-    return int(value)  # type: ignore[call-overload]
+    return int(value)
 
 
 # --------------------------------------------------------------------------- double gyre
@@ -262,7 +262,10 @@ def _encoding(ds: xr.Dataset) -> dict[str, dict[str, object]]:
     """The single files' encoding, chunked one member and one time step at a time."""
     encoding = {name: dict(enc) for name, enc in netcdf_encoding(ds).items()}
     for name in ("u", "v"):
-        encoding[name]["chunksizes"] = (1, *encoding[name]["chunksizes"])  # type: ignore[misc]
+        chunks = encoding[name]["chunksizes"]
+        if not isinstance(chunks, tuple):  # netcdf_encoding chunks the velocities by a tuple
+            raise TypeError(f"{name}: chunksizes {chunks!r} is not a tuple")
+        encoding[name]["chunksizes"] = (1, *chunks)
     encoding[MEMBER_DIM] = {"dtype": "int32", "_FillValue": None}
     for key in ds.data_vars:
         if str(key).startswith("member_"):
