@@ -1,4 +1,4 @@
-"""MAVLink input fuzzing of the executive and the simulator (issue 5; the million-frame run is bench/bench_fuzz.py).
+"""MAVLink input fuzzing of the executive and the simulator (the million-frame run is bench/bench_fuzz.py).
 
 Real datagrams over UDP on 127.0.0.1 into the real input paths. Checked: nothing
 raises; an invalid frame changes nothing and makes no command; a valid stream

@@ -1,4 +1,4 @@
-"""Link faults on UDP (issue 5): the closed loop through ``tests.support.linkfault.LinkFaultProxy``.
+"""Link faults on UDP: the closed loop through ``tests.support.linkfault.LinkFaultProxy``.
 
 ``lrauv sim`` runs as a process, the executive in a thread, and the proxy between
 them drops, duplicates, reorders and delays datagrams, or cuts the link. All fault

@@ -1,4 +1,4 @@
-"""Crash and restart (issue 5): ``kill -9`` the executive mid-mission, then ``lrauv exec --resume``.
+"""Crash and restart: ``kill -9`` the executive mid-mission, then ``lrauv exec --resume``.
 
 Both sides are real processes over UDP, as at sea: ``lrauv sim`` with the GCS
 heartbeat failsafe off (``FS_GCS_ENABLE 0``, an untethered AUV) and ``lrauv exec``

@@ -1,4 +1,4 @@
-"""MAVLink 2 signing of uploads and commands (issue 5): keys, verdicts, the rule, and a live executive.
+"""MAVLink 2 signing of uploads and commands: keys, verdicts, the rule, and a live executive.
 
 The pure parts (``executive.signing``) are checked against frames signed by pymavlink's
 own ``sign_packet``, and ours against pymavlink's own check, so the two implementations

@@ -1,4 +1,4 @@
-"""Uploads, replanning, multi-goal missions and failsafes on a running executive, over real UDP (issue 3).
+"""Uploads, replanning, multi-goal missions and failsafes on a running executive, over real UDP.
 
 The simulated vehicle (``vehicle_sim.endpoint.Simulator``) runs in a thread on an
 ephemeral port, the executive in another, with its ground-station link on a second

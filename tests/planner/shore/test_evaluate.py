@@ -597,5 +597,5 @@ def test_resolution_change_compares_the_campaigns_plans_with_plans_at_half_the_s
     r = out["physical-expected"]
     assert r["starts"] == len(changes) > 0
     assert r["median"] == pytest.approx(float(np.median(changes))) and r["max"] == pytest.approx(max(changes))
-    assert r["median"] < 0.1  # issue 8's target, here over the starts
+    assert r["median"] < 0.1  # the evaluation's resolution target (docs/evaluation.md), here over the starts
     assert out["physical-robust"]["starts"] > 0

@@ -1,4 +1,4 @@
-"""``lrauv replay``: the dive summary, the decision audit and bad or damaged logs (issue 4).
+"""``lrauv replay``: the dive summary, the decision audit and bad or damaged logs.
 
 The log is a real one, shared with the other replay tests (``dive_log`` in
 conftest.py): ``lrauv sim`` and ``lrauv exec`` as processes over UDP to the goal.
