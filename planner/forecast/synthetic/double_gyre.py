@@ -87,7 +87,7 @@ _REFERENCE = (
 
 
 class _FieldError(PlannerError):
-    """A bad settings field; ``field`` lets ``settings_from_args`` name the command-line option."""
+    """A bad settings field; ``field`` lets ``planner.cli.forecast`` name the command-line option."""
 
     def __init__(self, field: str, message: str) -> None:
         super().__init__(message)

@@ -85,7 +85,7 @@ MAX_MEMBERS = 1000  # a guard against typos: an ensemble is built in memory
 
 
 class _ArgumentError(PlannerError):
-    """A bad argument; ``argument`` lets ``write_ensemble_from_args`` name the command-line option."""
+    """A bad argument; ``argument`` lets ``planner.cli.forecast`` name the command-line option."""
 
     def __init__(self, argument: str, message: str) -> None:
         super().__init__(message)
