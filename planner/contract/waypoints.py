@@ -133,7 +133,7 @@ _RESULT_TEXT = {  # common.xml's descriptions
     MissionResult.OPERATION_CANCELLED: "current mission operation cancelled",
 }
 
-# MAV_CMD names for error messages (common.xml; tests/test_waypoints.py checks them against pymavlink).
+# MAV_CMD names for error messages (common.xml; tests/planner/contract/test_waypoints.py checks them against pymavlink).
 COMMAND_NAMES = {
     16: "NAV_WAYPOINT", 17: "NAV_LOITER_UNLIM", 18: "NAV_LOITER_TURNS", 19: "NAV_LOITER_TIME",
     20: "NAV_RETURN_TO_LAUNCH", 21: "NAV_LAND", 22: "NAV_TAKEOFF", 30: "NAV_CONTINUE_AND_CHANGE_ALT",
