@@ -1,0 +1,644 @@
+"""Sampling the physical model's transitions: RK4 through the current, per cell and channel.
+
+docs/physical-model.md gives the model; ``planner.physical.model`` turns the samples into the
+transitions the solvers walk. A *channel* is one motion of a cell that does not depend on the
+heading unless it says so: DRIFT, UP, DOWN, then FORWARD along each of the eight headings and
+(with course offsets) FORWARD_LEFT and FORWARD_RIGHT along each. ROTATE holds station and needs
+no sampling. The heading-free channels are therefore sampled once per cell and layer.
+
+Outcomes are stored compactly, per (cell, channel), as a list of the outcome cells that any
+sample ended in (a *slot*: the offset within +-2 cells), with the number of samples and their
+largest energy. Cells are sampled in blocks so the dense scratch of one block is all the
+memory the sampling needs beyond its result.
+
+Goal entry (a FORWARD or DRIFT sample ends on entering a goal cell) is kept apart: the goal-free
+samples of the whole grid are computed once per forecast, and ``enter_goal`` samples again only
+the cells from which a sample can reach a goal cell (within two cells of one), so a second goal
+on the same forecast costs a small patch, not the grid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.contract.errors import GridError
+from planner.contract.geodesy import EARTH_RADIUS_M
+from planner.contract.headings import N_HEADINGS, courses_deg
+from planner.contract.settings import PhysicalSettings, PlanSettings
+from planner.contract.vehicle import power_draw_w
+from planner.grid import Grid
+
+# Sample channels per cell: DRIFT, UP, DOWN, then FORWARD along each of the eight headings, then
+# (with course offsets) FORWARD_LEFT and FORWARD_RIGHT along each (planner.contract.headings.courses_deg).
+N_CHANNELS_BEARINGS = 3 + N_HEADINGS
+N_CHANNELS_COURSES = 3 + 3 * N_HEADINGS
+SLOTS = 25  # outcome cells within +-2 cells: slot = (dj + 2) * 5 + (di + 2)
+GOAL_REACH_CELLS = 2  # a sample ends within 1.5 cells of its cell's centre: goal entry changes cells this near
+_BLOCK_CELLS = 8192  # cells sampled per block: the dense scratch is about 5 MB per 1,000 cells
+
+
+def transition_limit_s(grid: Grid, settings: PlanSettings) -> float:
+    """``max_transition_s``, or by default the time for four crossings of the largest cell at cruise
+    speed: long enough that a vehicle under way always leaves its cell in still water."""
+    given = settings.physical.max_transition_s
+    if given is not None:
+        return float(given)
+    dx_m, dy_m = grid.cell_size_m()
+    return 4.0 * max(float(np.max(dx_m)), dy_m) / settings.vehicle.cruise_speed_m_s
+
+
+def member_offsets_m_s(settings: PhysicalSettings) -> NDArray[np.float64]:
+    """(east, north) current offsets of the forecast-error members, the forecast's own (0, 0) first.
+
+    ``error_members`` offsets of radius rho in evenly spaced directions: over the members and the
+    forecast, each component's variance is ``M / (M + 1) * rho^2 / 2``, set equal to
+    ``current_error_m_s^2``.
+    """
+    m = settings.error_members
+    out = np.zeros((m + 1, 2))
+    if m:
+        rho = settings.current_error_m_s * math.sqrt(2.0 * (m + 1) / m)
+        angle = 2.0 * np.pi * np.arange(m) / m
+        out[1:, 0] = rho * np.cos(angle)
+        out[1:, 1] = rho * np.sin(angle)
+    return out
+
+
+def start_offsets(settings: PhysicalSettings) -> NDArray[np.float64]:
+    """(di, dj) of the start points in cells: an S x S lattice at the centres of equal sub-cells."""
+    s = settings.start_points
+    a = (np.arange(s) + 0.5) / s - 0.5
+    di, dj = np.meshgrid(a, a, indexing="xy")
+    return np.column_stack([di.ravel(), dj.ravel()])
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class SampleStats:
+    """What the samples of one forecast member (or several, combined) say, per cell and channel.
+
+    Cells are ``(l * ny + j) * nx + i``; a channel ``q = cell * n_channels + channel``. Per
+    channel: ``hazard`` (a sample touched land or left the grid: the action is unavailable),
+    the sums of the samples' energy ``esum`` (Wh) and duration ``tsum`` (s), and its outcomes
+    ``ptr[q]:ptr[q + 1]`` into ``slot`` (int8, ascending), ``count`` and ``emax`` (the largest
+    energy of the samples that ended there, Wh). Also the planning-grid currents ``u``/``v``
+    (L, ny, nx; NaN = land) and the ROTATE energy ``rot_wh`` (L, ny, nx). Plain arrays: a Dask
+    worker returns one per member.
+    """
+
+    n_channels: int
+    hazard: NDArray[np.bool_]  # (cells, channels)
+    esum: NDArray[np.float64]
+    tsum: NDArray[np.float64]
+    ptr: NDArray[np.int64]  # (cells * channels + 1,)
+    slot: NDArray[np.int8]
+    count: NDArray[np.int32]
+    emax: NDArray[np.float64]
+    n_samples: int
+    u: NDArray[np.float64]
+    v: NDArray[np.float64]
+    rot_wh: NDArray[np.float64]
+    members: int = 1
+
+    @property
+    def n_outcomes(self) -> int:
+        return int(self.slot.size)
+
+    def dense(self) -> tuple[NDArray[np.int32], NDArray[np.float64]]:
+        """``count`` and ``emax`` as (cells, channels, 25) arrays (for tests and small grids)."""
+        cells = self.hazard.shape[0]
+        count = np.zeros((cells * self.n_channels, SLOTS), dtype=np.int32)
+        emax = np.zeros((cells * self.n_channels, SLOTS))
+        q = np.repeat(np.arange(cells * self.n_channels), np.diff(self.ptr))
+        count[q, self.slot] = self.count
+        emax[q, self.slot] = self.emax
+        return count.reshape(cells, self.n_channels, SLOTS), emax.reshape(cells, self.n_channels, SLOTS)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class _Kernel:
+    """The arguments the sampling kernel shares between the whole grid and a goal patch."""
+
+    uf: NDArray[np.float64]
+    vf: NDArray[np.float64]
+    wet: NDArray[np.bool_]
+    water: NDArray[np.bool_]
+    refine: int
+    lat0: float
+    dlat: float
+    dlon_rad: float
+    dy_m: float
+    depth_m: NDArray[np.float64]
+    course_rad: NDArray[np.float64]
+    offsets: NDArray[np.float64]
+    members: NDArray[np.float64]
+    speed: float
+    glide_rate: float
+    t_max: float
+    rk4_steps: int
+    powers: NDArray[np.float64]
+    n_channels: int
+
+    def run(self, cells: NDArray[np.int64], goal: NDArray[np.bool_]) -> tuple[NDArray, ...]:
+        """Dense samples of ``cells``: hazard, esum, tsum (n, channels), count and emax (n, channels, 25)."""
+        n = cells.size
+        count = np.zeros((n, self.n_channels, SLOTS), dtype=np.int32)
+        emax = np.zeros((n, self.n_channels, SLOTS))
+        esum = np.zeros((n, self.n_channels))
+        tsum = np.zeros((n, self.n_channels))
+        hazard = np.zeros((n, self.n_channels), dtype=np.bool_)
+        _sample_cells(cells, self.uf, self.vf, self.wet, self.water, goal, self.refine, self.lat0, self.dlat,
+                      self.dlon_rad, self.dy_m, self.depth_m, self.course_rad, self.offsets, self.members, self.speed,
+                      self.glide_rate, self.t_max, self.rk4_steps, self.powers, count, emax, esum, tsum, hazard)
+        return hazard, esum, tsum, count, emax
+
+
+def _kernel(u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], grid: Grid, settings: PlanSettings,
+            refine: int) -> tuple[_Kernel, NDArray[np.float64], NDArray[np.float64]]:
+    L, ny, nx = grid.n_layers, grid.ny, grid.nx
+    shape_f = (L, (ny - 1) * refine + 1, (nx - 1) * refine + 1)
+    uf = np.ascontiguousarray(u_fine_m_s, dtype=np.float64)
+    vf = np.ascontiguousarray(v_fine_m_s, dtype=np.float64)
+    if uf.shape != shape_f or vf.shape != shape_f:
+        raise GridError(f"currents: expected shape {shape_f} on the refined grid; got {uf.shape} and {vf.shape}")
+    u = np.ascontiguousarray(uf[:, ::refine, ::refine])
+    v = np.ascontiguousarray(vf[:, ::refine, ::refine])
+    finite = np.isfinite(uf) & np.isfinite(vf)
+    # A fine cell whose four nodes are all water: interpolation there needs no land check.
+    wet = np.ascontiguousarray(finite[:, :-1, :-1] & finite[:, 1:, :-1] & finite[:, :-1, 1:] & finite[:, 1:, 1:])
+    ps, vp = settings.physical, settings.vehicle
+    _dx_m, dy_m = grid.cell_size_m()
+    powers = np.array([
+        float(power_draw_w(vp, 0.0, False)),  # DRIFT
+        float(power_draw_w(vp, 0.0, True)),  # UP / DOWN: no thrust, buoyancy engine
+        float(power_draw_w(vp, vp.cruise_speed_m_s, False)),  # FORWARD
+    ])
+    kernel = _Kernel(
+        uf=uf, vf=vf, wet=wet, water=np.isfinite(u) & np.isfinite(v), refine=refine, lat0=float(grid.lat_deg[0]),
+        dlat=grid.dlat_deg, dlon_rad=math.radians(grid.dlon_deg), dy_m=dy_m,
+        depth_m=np.asarray(grid.depth_m, dtype=np.float64),
+        course_rad=np.ascontiguousarray(np.radians(courses_deg(grid.bearings_deg()))),  # (ny, 8, 3), from north
+        offsets=start_offsets(ps), members=member_offsets_m_s(ps), speed=vp.cruise_speed_m_s,
+        glide_rate=vp.glide_rate_m_s, t_max=transition_limit_s(grid, settings), rk4_steps=ps.rk4_steps,
+        powers=powers, n_channels=N_CHANNELS_COURSES if ps.course_offsets else N_CHANNELS_BEARINGS,
+    )
+    return kernel, u, v
+
+
+def sample_transitions(
+    u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], grid: Grid, settings: PlanSettings, *, refine: int,
+    goal_mask: NDArray[np.bool_] | None = None,
+) -> SampleStats:
+    """Sample every water cell's channels in one forecast member; currents on ``fine_grid(grid, refine)``.
+
+    ``goal_mask`` (L, ny, nx): a FORWARD or DRIFT sample that enters a goal cell ends there, when
+    it enters, as a vehicle arrives on entering the goal cells (not a cell spacing later). Without
+    it the samples are goal-free; ``enter_goal`` adds a goal to them.
+    """
+    kernel, u, v = _kernel(u_fine_m_s, v_fine_m_s, grid, settings, refine)
+    no_goal = np.zeros(kernel.water.shape, dtype=np.bool_)
+    cells = np.flatnonzero(kernel.water.ravel()).astype(np.int64)
+    n_cells = kernel.water.size
+    n_ch = kernel.n_channels
+    hazard = np.ones((n_cells, n_ch), dtype=np.bool_)  # land: nothing is available
+    esum = np.zeros((n_cells, n_ch))
+    tsum = np.zeros((n_cells, n_ch))
+    n_out = np.zeros(n_cells * n_ch, dtype=np.int64)
+    parts: list[tuple[NDArray, NDArray, NDArray]] = []
+    for lo in range(0, cells.size, _BLOCK_CELLS):
+        block = cells[lo:lo + _BLOCK_CELLS]
+        h, es, ts, count, emax = kernel.run(block, no_goal)
+        hazard[block], esum[block], tsum[block] = h, es, ts
+        parts.append(_compact(block, n_ch, h, count, emax, n_out))
+    ptr = np.zeros(n_cells * n_ch + 1, dtype=np.int64)
+    np.cumsum(n_out, out=ptr[1:])
+    slot = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int8)
+    count = np.concatenate([p[1] for p in parts]) if parts else np.zeros(0, np.int32)
+    emax = np.concatenate([p[2] for p in parts]) if parts else np.zeros(0)
+    stats = SampleStats(n_channels=n_ch, hazard=hazard, esum=esum, tsum=tsum, ptr=ptr, slot=slot, count=count,
+                        emax=emax, n_samples=kernel.offsets.shape[0] * kernel.members.shape[0], u=u, v=v,
+                        rot_wh=_rotate_wh(u, v, settings))
+    if goal_mask is not None and np.any(goal_mask):
+        stats = _patch(stats, kernel, np.ascontiguousarray(goal_mask, dtype=np.bool_))
+    return stats
+
+
+def enter_goal(stats: SampleStats, u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], grid: Grid,
+               settings: PlanSettings, *, refine: int, goal_mask: NDArray[np.bool_]) -> SampleStats:
+    """Goal-free ``stats`` of one member with the goal ``goal_mask`` entered: the cells within
+    ``GOAL_REACH_CELLS`` of a goal cell sampled again with it, the rest kept."""
+    if stats.members != 1:
+        raise GridError("enter_goal: the goal is entered per forecast member, before members are combined")
+    kernel, _u, _v = _kernel(u_fine_m_s, v_fine_m_s, grid, settings, refine)
+    if kernel.n_channels != stats.n_channels:
+        raise GridError("enter_goal: the samples were taken with other settings")
+    return _patch(stats, kernel, np.ascontiguousarray(goal_mask, dtype=np.bool_)) if np.any(goal_mask) else stats
+
+
+def goal_reach(goal_mask: NDArray[np.bool_], water: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Water cells from which a FORWARD or DRIFT sample can enter a goal cell of its own layer."""
+    L, ny, nx = goal_mask.shape
+    r = GOAL_REACH_CELLS
+    near = np.zeros((L, ny + 2 * r, nx + 2 * r), dtype=bool)
+    for dj in range(-r, r + 1):
+        for di in range(-r, r + 1):
+            near[:, r + dj:r + dj + ny, r + di:r + di + nx] |= goal_mask
+    return near[:, r:r + ny, r:r + nx] & water
+
+
+def _patch(stats: SampleStats, kernel: _Kernel, goal: NDArray[np.bool_]) -> SampleStats:
+    cells = np.flatnonzero(goal_reach(goal, kernel.water).ravel()).astype(np.int64)
+    n_ch = stats.n_channels
+    h, es, ts, count, emax = kernel.run(cells, goal)
+    hazard, esum, tsum = stats.hazard.copy(), stats.esum.copy(), stats.tsum.copy()
+    hazard[cells], esum[cells], tsum[cells] = h, es, ts
+    n_out = np.diff(stats.ptr)
+    slot_p, count_p, emax_p = _compact(cells, n_ch, h, count, emax, n_out)
+    ptr = np.zeros_like(stats.ptr)
+    np.cumsum(n_out, out=ptr[1:])
+    slot, cnt, em = _splice(stats.ptr, stats.slot, stats.count, stats.emax, ptr, cells, n_ch, slot_p, count_p, emax_p)
+    return SampleStats(n_channels=n_ch, hazard=hazard, esum=esum, tsum=tsum, ptr=ptr, slot=slot, count=cnt, emax=em,
+                       n_samples=stats.n_samples, u=stats.u, v=stats.v, rot_wh=stats.rot_wh, members=stats.members)
+
+
+def _rotate_wh(u: NDArray[np.float64], v: NDArray[np.float64], settings: PlanSettings) -> NDArray[np.float64]:
+    """ROTATE holds station for 45 degrees of turn: water speed = the current's, up to the maximum."""
+    vp = settings.vehicle
+    rot_s = 45.0 / vp.yaw_rate_deg_s
+    speed = np.minimum(np.hypot(np.nan_to_num(u), np.nan_to_num(v)), vp.max_speed_m_s)
+    return np.ascontiguousarray(power_draw_w(vp, speed, False) * rot_s / 3600.0, dtype=np.float64)
+
+
+def combine(stats: list[SampleStats]) -> SampleStats:
+    """Forecast members as outcomes: every member's samples together (docs/scale-out.md).
+
+    The worst case is then over all members' samples and the expected cost averages the members
+    (each has as many samples). A cell is water only where every member has water. Summed in
+    member order, so the result does not depend on where the members were sampled.
+    """
+    if not stats:
+        raise GridError("an ensemble needs at least one member")
+    first = stats[0]
+    if len(stats) == 1:
+        return first
+    shapes = {s.hazard.shape for s in stats}
+    if len(shapes) != 1 or len({s.n_samples for s in stats}) != 1:
+        raise GridError(f"ensemble members sampled on different grids or settings: {sorted(shapes)}")
+    out = first
+    u, v = first.u.copy(), first.v.copy()
+    rot = first.rot_wh.copy()
+    for s in stats[1:]:
+        ptr, slot, count, emax = _merge(out.ptr, out.slot, out.count, out.emax, s.ptr, s.slot, s.count, s.emax)
+        land = ~(np.isfinite(s.u) & np.isfinite(s.v))
+        u[land] = np.nan
+        v[land] = np.nan
+        rot = np.maximum(rot, s.rot_wh)
+        out = SampleStats(n_channels=out.n_channels, hazard=out.hazard | s.hazard, esum=out.esum + s.esum,
+                          tsum=out.tsum + s.tsum, ptr=ptr, slot=slot, count=count, emax=emax,
+                          n_samples=out.n_samples + s.n_samples, u=u, v=v, rot_wh=rot,
+                          members=out.members + s.members)
+    return out
+
+
+# --------------------------------------------------------------------------- compiled kernels
+
+# Shorthands for the kernels' array arguments.
+_F64 = NDArray[np.float64]
+_I64 = NDArray[np.int64]
+_Mask = NDArray[np.bool_]
+
+
+@numba.njit(cache=True, nogil=True)
+def _interp_slow(f: _F64, l: int, X: float, Y: float) -> float:  # pragma: no cover - compiled
+    """Bilinear value of layer ``l`` at fine-grid index point (X, Y), clamped to the grid; NaN when a
+    node with non-zero weight is land."""
+    nyf, nxf = f.shape[1], f.shape[2]
+    X = min(max(X, 0.0), nxf - 1.0)
+    Y = min(max(Y, 0.0), nyf - 1.0)
+    x0 = min(int(X), nxf - 2)
+    y0 = min(int(Y), nyf - 2)
+    fx = X - x0
+    fy = Y - y0
+    total = 0.0
+    for dy in range(2):
+        wy = fy if dy else 1.0 - fy
+        if wy == 0.0:
+            continue
+        for dx in range(2):
+            wx = fx if dx else 1.0 - fx
+            if wx == 0.0:
+                continue
+            total += wx * wy * f[l, y0 + dy, x0 + dx]  # NaN propagates: land
+    return total
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _current(uf: _F64, vf: _F64, wet: _Mask, l: int, X: float, Y: float) -> tuple[float, float]:  # pragma: no cover
+    """(u, v) of layer ``l`` at fine-grid index point (X, Y): inside a fine cell of four water nodes,
+    both components with one set of weights (the same sums, in the same order, as ``_interp_slow``);
+    elsewhere the clamped, land-checking path."""
+    if X >= 0.0 and Y >= 0.0:
+        x0 = int(X)
+        y0 = int(Y)
+        if x0 < wet.shape[2] and y0 < wet.shape[1] and wet[l, y0, x0]:
+            fx = X - x0
+            fy = Y - y0
+            w00 = (1.0 - fx) * (1.0 - fy)
+            w01 = fx * (1.0 - fy)
+            w10 = (1.0 - fx) * fy
+            w11 = fx * fy
+            cu = w00 * uf[l, y0, x0] + w01 * uf[l, y0, x0 + 1] + w10 * uf[l, y0 + 1, x0] + w11 * uf[l, y0 + 1, x0 + 1]
+            cv = w00 * vf[l, y0, x0] + w01 * vf[l, y0, x0 + 1] + w10 * vf[l, y0 + 1, x0] + w11 * vf[l, y0 + 1, x0 + 1]
+            return cu, cv
+    return _interp_slow(uf, l, X, Y), _interp_slow(vf, l, X, Y)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _velocity(  # pragma: no cover
+    uf: _F64, vf: _F64, wet: _Mask, refine: int, la: int, lb: int, wb: float, x: float, y: float,
+    lat0: float, dlat: float, dlon_rad: float, dy_m: float, we: float, wn: float,
+) -> tuple[float, float]:
+    """(dx/dt, dy/dt) in planning cells per second at planning-index point (x, y); NaN on land.
+
+    Over ground = through water (``we``, ``wn``, m/s, members' offsets included) + the current of
+    layer ``la`` blended with ``lb`` by weight ``wb`` (glides). A stage after one on land is NaN too."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        return math.nan, math.nan
+    X = x * refine
+    Y = y * refine
+    cu, cv = _current(uf, vf, wet, la, X, Y)
+    if wb > 0.0:
+        bu, bv = _current(uf, vf, wet, lb, X, Y)
+        cu = (1.0 - wb) * cu + wb * bu
+        cv = (1.0 - wb) * cv + wb * bv
+    lat = lat0 + y * dlat
+    dx_m = EARTH_RADIUS_M * math.cos(math.radians(lat)) * dlon_rad  # spec section 1, at the point's latitude
+    return (cu + we) / dx_m, (cv + wn) / dy_m
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _nearest(x: float) -> int:  # pragma: no cover
+    """Nearest index, halves going to the lower one (as ``Grid.nearest_cell``)."""
+    return int(math.ceil(x - 0.5))
+
+
+# A sample's state between RK4 steps.
+_RUNNING, _DONE, _FAILED = 0, 1, 2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _step(  # pragma: no cover
+    uf: _F64, vf: _F64, wet: _Mask, goal: _Mask, refine: int, la: int, lb: int, glide_s: float, x0: float, y0: float,
+    x: float, y: float, t: float, we: float, wn: float, end: float, h: float, lat0: float, dlat: float,
+    dlon_rad: float, dy_m: float, nx: int, ny: int,
+) -> tuple[int, float, float, float]:
+    """One RK4 step of one sample from (x, y) at time t. Returns (state, x, y, t).
+
+    ``glide_s`` > 0: a glide from layer ``la`` to ``lb`` lasting exactly ``glide_s`` (= ``end``);
+    else a move until one cell spacing from the start (x0, y0) along either axis, entering a goal
+    cell of layer ``la`` (``goal``), or ``end``. Crossings are placed on the RK4 step's chord.
+    The sample fails where a stage touches land or it leaves the grid.
+    """
+    gliding = glide_s > 0.0
+    hh = min(h, end - t)
+    w1 = t / glide_s if gliding else 0.0
+    w2 = (t + 0.5 * hh) / glide_s if gliding else 0.0
+    w3 = (t + hh) / glide_s if gliding else 0.0
+    k1x, k1y = _velocity(uf, vf, wet, refine, la, lb, w1, x, y, lat0, dlat, dlon_rad, dy_m, we, wn)
+    k2x, k2y = _velocity(uf, vf, wet, refine, la, lb, w2, x + 0.5 * hh * k1x, y + 0.5 * hh * k1y, lat0, dlat,
+                         dlon_rad, dy_m, we, wn)
+    k3x, k3y = _velocity(uf, vf, wet, refine, la, lb, w2, x + 0.5 * hh * k2x, y + 0.5 * hh * k2y, lat0, dlat,
+                         dlon_rad, dy_m, we, wn)
+    k4x, k4y = _velocity(uf, vf, wet, refine, la, lb, w3, x + hh * k3x, y + hh * k3y, lat0, dlat, dlon_rad, dy_m,
+                         we, wn)
+    xn = x + hh / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+    yn = y + hh / 6.0 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
+    if not (math.isfinite(xn) and math.isfinite(yn)):
+        return _FAILED, x, y, t  # a stage touched land
+    tau = 1.0  # the step's fraction at which the one-spacing box is left
+    if not gliding and (abs(xn - x0) >= 1.0 or abs(yn - y0) >= 1.0):
+        if abs(xn - x0) >= 1.0:
+            tau = min(tau, (x0 + math.copysign(1.0, xn - x0) - x) / (xn - x))
+        if abs(yn - y0) >= 1.0:
+            tau = min(tau, (y0 + math.copysign(1.0, yn - y0) - y) / (yn - y))
+        xn = x + tau * (xn - x)
+        yn = y + tau * (yn - y)
+    if not gliding:
+        gi = _nearest(xn)
+        gj = _nearest(yn)
+        if 0 <= gi < nx and 0 <= gj < ny and goal[la, gj, gi] and not goal[la, _nearest(y), _nearest(x)]:
+            enter = 0.0  # the chord's fraction at which it enters that goal cell
+            if abs(x - gi) > 0.5:
+                edge = gi - 0.5 if xn > x else gi + 0.5
+                enter = max(enter, (edge - x) / (xn - x))
+            if abs(y - gj) > 0.5:
+                edge = gj - 0.5 if yn > y else gj + 0.5
+                enter = max(enter, (edge - y) / (yn - y))
+            enter = min(enter + 1e-6, 1.0)  # just inside: a point on the edge belongs to the lower cell
+            return _DONE, x + enter * (xn - x), y + enter * (yn - y), t + enter * tau * hh
+    if tau < 1.0:
+        t = t + tau * hh
+        state = _DONE
+    else:
+        t += hh
+        state = _RUNNING if t < end - 1e-9 else _DONE
+    if xn < -0.5 or xn > nx - 0.5 or yn < -0.5 or yn > ny - 0.5:
+        return _FAILED, xn, yn, t  # left the grid
+    return state, xn, yn, t
+
+
+@numba.njit(cache=True, parallel=True)
+def _sample_cells(  # pragma: no cover
+    cells: _I64, uf: _F64, vf: _F64, wet: _Mask, water: _Mask, goal: _Mask, refine: int, lat0: float, dlat: float,
+    dlon_rad: float, dy_m: float, depth_m: _F64, course_rad: _F64, offsets: _F64, members: _F64, speed: float,
+    glide_rate: float, t_max: float, rk4_steps: int, powers: _F64,
+    count: NDArray[np.int32], emax: _F64, esum: _F64, tsum: _F64, hazard: _Mask,
+) -> None:
+    """Sample every channel of ``cells`` (water cells); row ``r`` of the outputs is ``cells[r]``."""
+    L, ny, nx = water.shape
+    n_off = offsets.shape[0]
+    n_mem = members.shape[0]
+    n_ch = count.shape[1]
+    # Parallel over (cell, channel): with few cells per block, every core still has work.
+    for rc in numba.prange(cells.size * n_ch):
+        r = rc // n_ch
+        ch = rc % n_ch
+        c = cells[r]
+        l = c // (ny * nx)
+        j = (c // nx) % ny
+        i = c % nx
+        lat = lat0 + j * dlat
+        dx_m = EARTH_RADIUS_M * math.cos(math.radians(lat)) * dlon_rad
+        cell_m = min(dx_m, dy_m)
+        cu, cv = _current(uf, vf, wet, l, i * refine, j * refine)
+        cur = math.hypot(cu, cv)
+        lb = l
+        glide_s = 0.0
+        we = 0.0
+        wn = 0.0
+        if ch == 1 or ch == 2:
+            lb = l - 1 if ch == 1 else l + 1
+            if lb < 0 or lb >= L or not water[lb, j, i]:
+                hazard[r, ch] = True
+                continue
+            glide_s = abs(depth_m[lb] - depth_m[l]) / glide_rate
+            power = powers[1]
+            h = glide_s / rk4_steps
+        else:
+            power = powers[0]
+            v_water = 0.0
+            if ch >= 3:
+                b = course_rad[j, (ch - 3) % 8, (ch - 3) // 8]
+                we = speed * math.sin(b)
+                wn = speed * math.cos(b)
+                power = powers[2]
+                v_water = speed
+            h = min(t_max, cell_m / max(v_water + cur, 1e-3)) / rk4_steps
+        # All samples of the channel advance together, one RK4 step each per pass: their steps are
+        # independent, so the core overlaps them instead of waiting on one sample's chain of stages.
+        n_q = n_off * n_mem
+        xs = np.empty(n_q)
+        ys = np.empty(n_q)
+        ts = np.zeros(n_q)
+        state = np.empty(n_q, dtype=np.int8)
+        end = glide_s if glide_s > 0.0 else t_max
+        first = _RUNNING if 0.0 < end - 1e-9 else _DONE
+        for q in range(n_q):
+            xs[q] = i + offsets[q // n_mem, 0]
+            ys[q] = j + offsets[q // n_mem, 1]
+            state[q] = first
+        running = n_q if first == _RUNNING else 0
+        while running > 0 and not hazard[r, ch]:
+            for q in range(n_q):
+                if state[q] != _RUNNING:
+                    continue
+                o = q // n_mem
+                m = q % n_mem
+                st, xs[q], ys[q], ts[q] = _step(uf, vf, wet, goal, refine, l, lb, glide_s, i + offsets[o, 0],
+                                                j + offsets[o, 1], xs[q], ys[q], ts[q], we + members[m, 0],
+                                                wn + members[m, 1], end, h, lat0, dlat, dlon_rad, dy_m, nx, ny)
+                state[q] = st
+                if st == _FAILED:
+                    hazard[r, ch] = True  # one stranded sample makes the action unavailable
+                    break
+                if st == _DONE:
+                    running -= 1
+        if hazard[r, ch]:
+            continue
+        for q in range(n_q):
+            ii = _nearest(xs[q])
+            jj = _nearest(ys[q])
+            di = ii - i
+            dj = jj - j
+            if ii < 0 or ii >= nx or jj < 0 or jj >= ny or abs(di) > 2 or abs(dj) > 2 or not water[lb, jj, ii]:
+                hazard[r, ch] = True
+                break
+            e = power * ts[q] / 3600.0
+            slot = (dj + 2) * 5 + (di + 2)
+            count[r, ch, slot] += 1
+            if e > emax[r, ch, slot]:
+                emax[r, ch, slot] = e
+            esum[r, ch] += e
+            tsum[r, ch] += ts[q]
+
+
+@numba.njit(cache=True)
+def _compact(  # pragma: no cover
+    cells: _I64, n_ch: int, hazard: _Mask, count: NDArray[np.int32], emax: _F64, n_out: _I64,
+) -> tuple[NDArray[np.int8], NDArray[np.int32], _F64]:
+    """The dense samples of ``cells`` as outcome lists (slots ascending); ``n_out`` gets each channel's length."""
+    total = 0
+    for r in range(cells.size):
+        for ch in range(n_ch):
+            if not hazard[r, ch]:
+                for s in range(SLOTS):
+                    if count[r, ch, s] > 0:
+                        total += 1
+    slot = np.empty(total, dtype=np.int8)
+    cnt = np.empty(total, dtype=np.int32)
+    em = np.empty(total)
+    e = 0
+    for r in range(cells.size):
+        for ch in range(n_ch):
+            k = 0
+            if not hazard[r, ch]:
+                for s in range(SLOTS):
+                    if count[r, ch, s] > 0:
+                        slot[e] = s
+                        cnt[e] = count[r, ch, s]
+                        em[e] = emax[r, ch, s]
+                        e += 1
+                        k += 1
+            n_out[cells[r] * n_ch + ch] = k
+    return slot, cnt, em
+
+
+@numba.njit(cache=True)
+def _splice(  # pragma: no cover
+    ptr: _I64, slot: NDArray[np.int8], count: NDArray[np.int32], emax: _F64, new_ptr: _I64, cells: _I64, n_ch: int,
+    slot_p: NDArray[np.int8], count_p: NDArray[np.int32], emax_p: _F64,
+) -> tuple[NDArray[np.int8], NDArray[np.int32], _F64]:
+    """The outcome lists with those of ``cells`` (in that order, from ``_compact``) replaced."""
+    n = new_ptr[-1]
+    out_slot = np.empty(n, dtype=np.int8)
+    out_count = np.empty(n, dtype=np.int32)
+    out_emax = np.empty(n)
+    patched = np.full(ptr.size - 1, -1, dtype=np.int64)
+    e = 0
+    for r in range(cells.size):
+        for ch in range(n_ch):
+            q = cells[r] * n_ch + ch
+            patched[q] = e
+            e += new_ptr[q + 1] - new_ptr[q]
+    for q in range(ptr.size - 1):
+        lo = new_ptr[q]
+        k = new_ptr[q + 1] - lo
+        if patched[q] >= 0:
+            src = patched[q]
+            for t in range(k):
+                out_slot[lo + t] = slot_p[src + t]
+                out_count[lo + t] = count_p[src + t]
+                out_emax[lo + t] = emax_p[src + t]
+        else:
+            src = ptr[q]
+            for t in range(k):
+                out_slot[lo + t] = slot[src + t]
+                out_count[lo + t] = count[src + t]
+                out_emax[lo + t] = emax[src + t]
+    return out_slot, out_count, out_emax
+
+
+@numba.njit(cache=True)
+def _merge(  # pragma: no cover
+    ptr_a: _I64, slot_a: NDArray[np.int8], count_a: NDArray[np.int32], emax_a: _F64,
+    ptr_b: _I64, slot_b: NDArray[np.int8], count_b: NDArray[np.int32], emax_b: _F64,
+) -> tuple[_I64, NDArray[np.int8], NDArray[np.int32], _F64]:
+    """Two members' outcome lists merged per channel: counts summed, the larger energy kept."""
+    nq = ptr_a.size - 1
+    ptr = np.zeros(nq + 1, dtype=np.int64)
+    cap = slot_a.size + slot_b.size
+    slot = np.empty(cap, dtype=np.int8)
+    count = np.empty(cap, dtype=np.int32)
+    emax = np.empty(cap)
+    e = 0
+    for q in range(nq):
+        a, a_end = ptr_a[q], ptr_a[q + 1]
+        b, b_end = ptr_b[q], ptr_b[q + 1]
+        while a < a_end or b < b_end:
+            if b >= b_end or (a < a_end and slot_a[a] < slot_b[b]):
+                slot[e], count[e], emax[e] = slot_a[a], count_a[a], emax_a[a]
+                a += 1
+            elif a >= a_end or slot_b[b] < slot_a[a]:
+                slot[e], count[e], emax[e] = slot_b[b], count_b[b], emax_b[b]
+                b += 1
+            else:
+                slot[e], count[e], emax[e] = slot_a[a], count_a[a] + count_b[b], max(emax_a[a], emax_b[b])
+                a += 1
+                b += 1
+            e += 1
+        ptr[q + 1] = e
+    return ptr, slot[:e].copy(), count[:e].copy(), emax[:e].copy()
