@@ -52,7 +52,8 @@ def model_lines(result: PlanResult) -> list[str]:
          f" currents {m.refine}x finer than the grid"),
     ]
     if s.criterion == "expected":
-        lines.append(f"solve      policy iteration: {sol.iterations} iterations, residual {sol.residual_wh:.2g} Wh")
+        lines.append(f"solve      value iteration: {sol.sweeps} sweeps, then policy iteration: {sol.iterations} "
+                     f"iterations, residual {sol.residual_wh:.2g} Wh")
     return lines
 
 
@@ -61,5 +62,7 @@ def time_line(result: PlanResult, total_s: float) -> str:
     t = result.timings_s
     stages = f"load {t['load_s']:.2f} s, resample {t['resample_s']:.2f} s, plan {t['plan_s']:.3f} s"
     if "transitions_s" in t:  # the physical model's plan time: sampling the transitions, then solving
-        stages += f" (transitions {t['transitions_s']:.2f} s, solve {t['plan_s'] - t['transitions_s']:.3f} s)"
+        sampling = f"sampling {t['sampling_s']:.2f} s, " if "sampling_s" in t else ""
+        stages += (f" ({sampling}transitions {t['transitions_s']:.2f} s,"
+                   f" solve {t['plan_s'] - t['transitions_s']:.3f} s)")
     return f"time       {stages}, total {total_s:.2f} s"

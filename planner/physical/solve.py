@@ -9,30 +9,28 @@ docs/physical-model.md. Both give the cost-to-go in watt-hours and the action of
   action that may leave the vehicle in its own state (it had not moved a cell spacing when
   ``max_transition_s`` ran out) may do so for ever in the worst case, so it is never chosen:
   its own state is an outcome that is never settled before the state itself.
-- ``expected``: a stochastic shortest path, V = min_a (c(s, a) + sum_o P(o | s, a) V(o)),
-  solved by policy iteration on sparse matrices (Bertsekas, "Dynamic Programming and Optimal
-  Control", vol. 2, ch. 3). Only states from which some policy reaches the goal with
-  probability 1 get a value (found by repeated backward search); the first policy steps to a
-  state nearer the goal in that search, so it is proper. Every cost is at least
-  ``min_cost_wh`` > 0, so an improper policy costs infinity and policy iteration never picks
-  one: a zero-cost cycle cannot trap it. An action changes only when better by more than
-  ``tolerance_wh``, so ties cannot make it cycle, and ``max_iterations`` bounds it anyway.
+- ``expected``: a stochastic shortest path, V = min_a (c(s, a) + sum_o P(o | s, a) V(o)), solved
+  by ``planner.physical.expected``: value iteration in Gauss-Seidel sweeps ordered by a backward
+  search from the goal, then policy iteration whose evaluations are exact and linear in the
+  states (strongly connected components of the policy, sinks first). Only states from which some
+  policy reaches the goal with probability 1 get a value. An action changes only when better by
+  more than ``tolerance_wh``, and ``max_iterations`` bounds policy iteration.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numba
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
 from planner.contract.actions import Action
 from planner.contract.errors import PlannerError
-from planner.physical.model import PhysicalModel
+from planner.physical.expected import solve_expected
+from planner.physical.model import PAIR_ACTIONS, PhysicalModel
 from planner.contract.settings import Goal
 from planner.paper.solve import GoalCells, goal_cells_on
 
@@ -59,10 +57,17 @@ class PhysicalSolution:
     value_wh: NDArray[np.float64]  # inf where unreachable or land
     time_s: NDArray[np.float64]  # time-to-go under the same criterion and policy
     action: NDArray[np.uint8]
-    policy_pair: NDArray[np.int64]  # the chosen pair per internal state index, -1 where none
-    iterations: int = 0
+    iterations: int = 0  # policy iterations (expected criterion)
+    sweeps: int = 0  # value-iteration sweeps before them (expected criterion)
     residual_wh: float = 0.0
     timings_s: dict[str, float] = field(default_factory=dict)
+
+    @cached_property
+    def policy_pair(self) -> NDArray[np.int64]:
+        """The chosen pair per internal state index (``PhysicalModel.pair_state``), -1 where none."""
+        m = self.model
+        flat = np.moveaxis(self.action, -1, 0).ravel()
+        return _pair_index(m.pair_state, m.pair_action, flat.astype(np.int64))
 
     @property
     def reachable(self) -> NDArray[np.bool_]:
@@ -110,18 +115,25 @@ def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
     L, ny, nx, K = model.grid.shape
     goal_states = np.flatnonzero(np.broadcast_to(goal_cells.mask[None], (K, L, ny, nx)).ravel())
     t0 = time.perf_counter()
+    iterations, sweeps, residual = 0, 0, 0.0
     if model.settings.criterion == "robust":
         value, tgo, pair = _robust(model.ptr, model.out_state, model.out_energy_max_wh, model.pair_state,
                                    model.duration_s, goal_states, model.n_states)
-        iterations, residual = 0, 0.0
+        action = np.full(model.n_states, int(Action.UNREACHABLE), dtype=np.uint8)
+        has = pair >= 0
+        action[has] = model.pair_action[pair[has]]
     elif model.settings.criterion == "expected":
-        value, tgo, pair, iterations, residual = _expected(model, goal_states)
+        is_goal = np.zeros(model.n_states, dtype=bool)
+        is_goal[goal_states] = True
+        result = solve_expected(model, is_goal)
+        value, tgo = result.value_wh, result.time_s
+        iterations, sweeps, residual = result.iterations, result.sweeps, result.residual_wh
+        action = np.full(model.n_states, int(Action.UNREACHABLE), dtype=np.uint8)
+        has = result.choice >= 0
+        action[has] = PAIR_ACTIONS[result.choice[has]]
     else:
         raise PlannerError(f"criterion: the physical model has robust and expected; got {model.settings.criterion!r}")
     solve_s = time.perf_counter() - t0
-    action = np.full(model.n_states, int(Action.UNREACHABLE), dtype=np.uint8)
-    has = pair >= 0
-    action[has] = model.pair_action[pair[has]]
     action[goal_states] = int(Action.AT_GOAL)
     water = np.broadcast_to(model.water[None], (K, L, ny, nx)).ravel()
     value = np.where(water, value, np.inf)
@@ -131,7 +143,7 @@ def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
 
     return PhysicalSolution(
         model=model, goal=goal, goal_cells=goal_cells, value_wh=to_lijk(value), time_s=to_lijk(tgo),
-        action=to_lijk(action), policy_pair=pair, iterations=iterations, residual_wh=residual,
+        action=to_lijk(action), iterations=iterations, sweeps=sweeps, residual_wh=residual,
         timings_s={"solve_s": solve_s},
     )
 
@@ -253,146 +265,15 @@ def _pop(hk: _F64, hv: _I64, n: int) -> int:  # pragma: no cover
     return n
 
 
-# --------------------------------------------------------------------------- expected
-
-
-def _expected(model: PhysicalModel, goal_states: NDArray[np.int64]) -> tuple[NDArray, NDArray, NDArray, int, float]:
-    ps = model.settings.physical
-    n = model.n_states
-    is_goal = np.zeros(n, dtype=bool)
-    is_goal[goal_states] = True
-    policy, alive = _proper_start(model.ptr, model.out_state, model.pair_state, is_goal, n)
-    n_pairs = model.n_pairs
-    rows = np.repeat(np.arange(n_pairs), np.diff(model.ptr))
-    # Q = c + P V over all pairs; outcomes at the goal carry V = 0, so their columns can stay.
-    P = sp.csr_matrix((model.out_prob, (rows, model.out_state)), shape=(n_pairs, n))
-    pair_ok = np.minimum.reduceat(alive[model.out_state], model.ptr[:-1]) if n_pairs else np.zeros(0, bool)
-    pair_ok &= alive[model.pair_state] & ~is_goal[model.pair_state]
-    cost = model.energy_wh
-    value = np.full(n, np.inf)
-    value[is_goal] = 0.0
-    solve_states = np.flatnonzero(alive & ~is_goal)
-    iterations = 0
-    for iterations in range(1, ps.max_iterations + 1):
-        value = _evaluate(P, cost, policy, solve_states, value)
-        q = np.full(n_pairs, np.inf)
-        q[pair_ok] = cost[pair_ok] + P[pair_ok] @ np.where(np.isfinite(value), value, 0.0)
-        best = _best_pairs(q, model.pair_state, n)
-        current = np.full(n, np.inf)
-        current[solve_states] = q[policy[solve_states]]
-        better = np.isfinite(q[np.maximum(best, 0)]) & (best >= 0) & (q[np.maximum(best, 0)] < current - ps.tolerance_wh)
-        if not better.any():
-            break
-        policy = np.where(better, best, policy)
-    else:
-        raise PlannerError(f"expected criterion: policy iteration did not settle in {ps.max_iterations} iterations "
-                           "(physical.max_iterations)")
-    q = np.full(n_pairs, np.inf)
-    q[pair_ok] = cost[pair_ok] + P[pair_ok] @ np.where(np.isfinite(value), value, 0.0)
-    best = _best_pairs(q, model.pair_state, n)
-    residual = float(np.max(value[solve_states] - q[best[solve_states]])) if solve_states.size else 0.0
-    tgo = np.full(n, np.inf)
-    tgo[is_goal] = 0.0
-    tgo = _evaluate(P, model.duration_s, policy, solve_states, tgo)
-    policy = np.where(alive & ~is_goal, policy, -1)
-    return value, tgo, policy, iterations, residual
-
-
-def _evaluate(P: sp.csr_matrix, cost: NDArray, policy: NDArray, states: NDArray, base: NDArray) -> NDArray:
-    """Solve V(s) = c(s, pi(s)) + sum P V for ``states``; other states keep ``base`` (goal: 0)."""
-    out = base.copy()
-    if states.size == 0:
-        return out
-    Pp = P[policy[states]]  # rows of the chosen pairs, columns all states
-    index = np.full(P.shape[1], -1, dtype=np.int64)
-    index[states] = np.arange(states.size)
-    Pc = Pp.tocoo()
-    inside = index[Pc.col] >= 0
-    A = sp.csr_matrix((Pc.data[inside], (Pc.row[inside], index[Pc.col[inside]])), shape=(states.size, states.size))
-    known = np.where(np.isfinite(base), base, 0.0)
-    rhs = cost[policy[states]] + sp.csr_matrix((Pc.data[~inside], (Pc.row[~inside], Pc.col[~inside])),
-                                               shape=Pp.shape) @ known
-    M = (sp.identity(states.size, format="csc") - A.tocsc())
-    with np.errstate(all="ignore"):
-        v = spla.spsolve(M, rhs)
-    if not np.all(np.isfinite(v)):
-        raise PlannerError("expected criterion: the policy's linear system is singular (an improper policy); "
-                           "raise physical.min_cost_wh")
-    out[states] = v
-    return out
-
-
-def _best_pairs(q: NDArray, pair_state: NDArray, n: int) -> NDArray[np.int64]:
-    """The pair of least Q per state (ties: the lower pair, i.e. the lower action code); -1 where none."""
-    order = np.lexsort((np.arange(q.size), q, pair_state))  # by state, then Q, then pair
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = pair_state[order[1:]] != pair_state[order[:-1]]
-    best = np.full(n, -1, dtype=np.int64)
-    sel = order[first]
-    sel = sel[np.isfinite(q[sel])]
-    best[pair_state[sel]] = sel
-    return best
+# --------------------------------------------------------------------------- policy pairs
 
 
 @numba.njit(cache=True)
-def _proper_start(  # pragma: no cover
-    ptr: _I64, out_state: _I64, pair_state: _I64, is_goal: NDArray[np.bool_], n_states: int,
-) -> tuple[_I64, NDArray[np.bool_]]:
-    """States that reach the goal with probability 1 under some policy, and a proper policy there.
-
-    Repeat: a pair is usable when all its outcomes are alive; a backward search from the goal over
-    usable pairs ranks the states; those it does not reach die. At the fixed point each alive
-    state's first-found pair has an outcome of lower rank, so the goal is reached w.p. 1.
-    """
-    n_pairs = pair_state.size
-    rev_count = np.zeros(n_states + 1, dtype=np.int64)
-    for p in range(n_pairs):
-        for e in range(ptr[p], ptr[p + 1]):
-            rev_count[out_state[e] + 1] += 1
-    rev_ptr = np.cumsum(rev_count)
-    fill = rev_ptr[:-1].copy()
-    rev_pair = np.empty(rev_ptr[-1], dtype=np.int64)
-    for p in range(n_pairs):
-        for e in range(ptr[p], ptr[p + 1]):
-            o = out_state[e]
-            rev_pair[fill[o]] = p
-            fill[o] += 1
-    alive = np.ones(n_states, dtype=np.bool_)
-    policy = np.full(n_states, -1, dtype=np.int64)
-    queue = np.empty(n_states, dtype=np.int64)
-    while True:
-        usable = np.zeros(n_pairs, dtype=np.bool_)
-        for p in range(n_pairs):
-            ok = not is_goal[pair_state[p]]
-            for e in range(ptr[p], ptr[p + 1]):
-                if not alive[out_state[e]]:
-                    ok = False
-                    break
-            usable[p] = ok
-        found = np.zeros(n_states, dtype=np.bool_)
-        policy[:] = -1
-        head = 0
-        tail = 0
-        for s in range(n_states):
-            if is_goal[s]:
-                found[s] = True
-                queue[tail] = s
-                tail += 1
-        while head < tail:
-            o = queue[head]
-            head += 1
-            for r in range(rev_ptr[o], rev_ptr[o + 1]):
-                p = rev_pair[r]
-                s = pair_state[p]
-                if usable[p] and not found[s]:
-                    found[s] = True
-                    policy[s] = p
-                    queue[tail] = s
-                    tail += 1
-        changed = False
-        for s in range(n_states):
-            if alive[s] and not found[s]:
-                alive[s] = False
-                changed = True
-        if not changed:
-            return policy, alive
+def _pair_index(pair_state: _I64, pair_action: NDArray[np.int8], action: _I64) -> _I64:  # pragma: no cover
+    """The pair of each state's action (pairs sorted by state), -1 where the state has none."""
+    out = np.full(action.size, -1, dtype=np.int64)
+    for p in range(pair_state.size):
+        s = pair_state[p]
+        if pair_action[p] == action[s]:
+            out[s] = p
+    return out
