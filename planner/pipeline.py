@@ -37,8 +37,8 @@ from planner.physical.model import (
     PhysicalModel,
     SampleStats,
     assemble,
-    build_physical,
     combine,
+    enter_goal,
     fine_grid,
     refine_factor,
     sample_transitions,
@@ -90,6 +90,24 @@ class PlanResult:
     solution: Solution | PhysicalSolution
     table: PolicyTable
     timings_s: dict[str, float]
+
+
+class SampleCache:
+    """The goal-free samples of the last forecast planned (planner.physical.sampling): a second goal on
+    the same forecast step, grid and settings reuses them and samples only the cells near its goal.
+
+    One entry: a mission's goals, or a batch worker's, are planned one forecast at a time.
+    """
+
+    def __init__(self) -> None:
+        self._key: tuple | None = None
+        self._stats: SampleStats | None = None
+
+    def get(self, key: tuple) -> SampleStats | None:
+        return self._stats if key == self._key else None
+
+    def put(self, key: tuple, stats: SampleStats) -> None:
+        self._key, self._stats = key, stats
 
 
 def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
@@ -239,12 +257,13 @@ def _goal_mask(grid: Grid, u: NDArray[np.float64], v: NDArray[np.float64], goal:
 
 
 def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progress: bool = False,
-              runner: Runner | None = None) -> PlanResult:
+              runner: Runner | None = None, samples: SampleCache | None = None) -> PlanResult:
     """Run the whole pipeline. Raises a PlannerError subclass on bad input.
 
     Several forecast members (``request.ensemble``, a member dimension, ``request.members``)
     are outcomes of the physical model: each member is sampled as a task of ``runner``
     (default: here), and their samples together make the transitions (docs/scale-out.md).
+    ``samples`` keeps one forecast's goal-free samples for the next goal planned on it.
     """
     timings: dict[str, float] = {}
     t = time.perf_counter()
@@ -270,7 +289,16 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         timings["resample_s"] = time.perf_counter() - t
         t = time.perf_counter()
         goal_mask = _goal_mask(grid, u, v, request.goal, forecast.source)
-        model = build_physical(uf, vf, grid, request.settings, refine=refine, goal_mask=goal_mask)
+        key = (forecast.identity, step, grid.bbox, grid.nx, grid.ny, tuple(grid.depth_m), refine,
+               request.settings.physical, request.settings.vehicle)
+        stats = samples.get(key) if samples is not None else None
+        if stats is None:
+            stats = sample_transitions(uf, vf, grid, request.settings, refine=refine)
+            if samples is not None:
+                samples.put(key, stats)
+        timings["sampling_s"] = time.perf_counter() - t
+        stats = enter_goal(stats, uf, vf, grid, request.settings, refine=refine, goal_mask=goal_mask)
+        model = assemble(stats, grid, request.settings, refine=refine)
         timings["transitions_s"] = time.perf_counter() - t
         _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each, "
                         f"currents {refine}x finer than the grid")
@@ -297,7 +325,7 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
 
 
 def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, workers: int | None = None,
-                        progress: bool = False) -> PlanResult:
+                        progress: bool = False, samples: SampleCache | None = None) -> PlanResult:
     """``make_plan``, several forecast members sampled where ``scheduler`` says (``planner.cluster.open_runner``).
 
     One member plans here without a runner; the file headers are read once, here.
@@ -305,7 +333,7 @@ def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, w
     refs = members_of(request)
     request = replace(request, members=tuple(refs))
     if len(refs) == 1:
-        return make_plan(request, progress=progress)
+        return make_plan(request, progress=progress, samples=samples)
     with open_runner(scheduler, workers=workers) as runner:
         _note(progress, f"{len(refs)} forecast members, sampled: {runner.describe()}")
         return make_plan(request, progress=progress, runner=runner)

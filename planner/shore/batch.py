@@ -24,7 +24,7 @@ from planner.contract.atomic import write_atomic
 from planner.contract.errors import LrauvError, MissionError, ShoreError
 
 if TYPE_CHECKING:  # for the annotation only: this module loads no numpy
-    from planner.pipeline import PlanRequest
+    from planner.pipeline import PlanRequest, SampleCache
 
 MAX_FLEET_BYTES = 1 << 20
 
@@ -124,7 +124,7 @@ def plan_item(item: BatchItem) -> BatchResult:
 
     t = time.perf_counter()
     try:
-        result = make_plan(item.request)
+        result = make_plan(item.request, samples=_worker_samples())
     except LrauvError as exc:
         return BatchResult(vehicle=item.vehicle, goal_index=item.goal_index, table=None, reachable=0,
                            water_states=0, plan_s=time.perf_counter() - t, error=str(exc))
@@ -133,6 +133,19 @@ def plan_item(item: BatchItem) -> BatchResult:
         reachable=int(result.solution.reachable.sum()), water_states=int(result.model.water.sum()) * 8,
         plan_s=time.perf_counter() - t,
     )
+
+
+def _worker_samples() -> SampleCache:
+    """This process's goal-free samples: a worker that plans several goals on one forecast samples it once."""
+    from planner.pipeline import SampleCache
+
+    global _SAMPLES
+    if _SAMPLES is None:
+        _SAMPLES = SampleCache()
+    return _SAMPLES
+
+
+_SAMPLES: SampleCache | None = None
 
 
 @dataclass(frozen=True, kw_only=True)

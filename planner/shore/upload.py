@@ -28,6 +28,7 @@ from planner.contract.errors import LrauvError, ShoreError
 if TYPE_CHECKING:
     from executive.signing import SigningKey
     from planner.contract.mission import Mission
+    from planner.pipeline import SampleCache
 
 GCS_SYSTEM, GCS_COMPONENT = 255, 190  # a ground station's usual MAVLink identity (MAVProxy, QGC)
 
@@ -57,10 +58,16 @@ def upload_mission(mission_path: Path, *, to: str, tables: Sequence[Path] = (), 
     names = {id(table): name for name, table in ready.items()}
     blobs = {n: files[names[id(t)]] for n, t in enumerate(plan.tables) if t is not None}
     with tempfile.TemporaryDirectory(prefix="lrauv-upload-") as tmp:
+        samples = None
         for n, goal in enumerate(mission.goals):
             if n not in blobs:
                 say(f"planning goal {n} on shore")
-                blobs[n] = _plan_goal(mission, n, forecast, Path(tmp) / f"goal-{n}.lrpt", report or _silent)
+                if samples is None:
+                    from planner.pipeline import SampleCache
+
+                    samples = SampleCache()  # the goals share one forecast: sampled once
+                blobs[n] = _plan_goal(mission, n, forecast, Path(tmp) / f"goal-{n}.lrpt", report or _silent,
+                                      samples)
         conn = _connect(to)
         try:
             if key is not None:
@@ -119,7 +126,8 @@ def _signing_diagnosis(conn: Any, *, signed: bool) -> str:  # conn: a pymavlink 
             " behind the vehicle's? (see its log)")
 
 
-def _plan_goal(mission: Mission, n: int, forecast: Path | None, out: Path, report: Callable[[str], None]) -> bytes:
+def _plan_goal(mission: Mission, n: int, forecast: Path | None, out: Path, report: Callable[[str], None],
+               samples: SampleCache) -> bytes:
     """Plan goal ``n`` as ``lrauv plan MISSION --goal ... --forecast ...`` would, write the table to ``out``."""
     from dataclasses import replace
 
@@ -135,7 +143,7 @@ def _plan_goal(mission: Mission, n: int, forecast: Path | None, out: Path, repor
             request = replace(PlanRequest.for_mission(mission, forecast, goal_index=n),
                               time_index=None, time_iso=None, variables=None, grid_file=None)
         t0 = time.perf_counter()
-        result = plan_with_scheduler(request)
+        result = plan_with_scheduler(request, samples=samples)
     except LrauvError as exc:
         raise ShoreError(f"{mission.path}: planning goal ({goal.lon_deg:g}, {goal.lat_deg:g}) failed: {exc}") from None
     data = result.table.to_bytes()
