@@ -7,7 +7,9 @@ whole command, start-up and table write included) and the process's peak RSS. ``
 the paper model's plan on the same grid for the ratio per state. ``--repo`` runs another checkout
 (older code) the same way, so old and new are measured the same day on the same machine.
 
-    .venv/bin/python bench/bench_physical_scale.py [--sizes 1,4,16] [--repeat 3] [--repo PATH] [--paper]
+    .venv/bin/python bench/bench_physical_scale.py [--sizes 1,2,4] [--repeat 3] [--repo PATH] [--paper] [--json OUT]
+    .venv/bin/python bench/bench_physical_scale.py --plot docs/benchmarks-physical-scale.png --label new --json new.json \
+        --label old --json old.json   # the cost per state-action of each run against the states
 
 Sizes are multiples of the demo grid's spacing: 1 is 29 x 21 (19,488 states), 4 is 113 x 81
 (292,896), ``4M`` is 500 x 250 (4,000,000). Then, in this process, a second goal on the same
@@ -17,6 +19,7 @@ forecast against the first (``--second-goal``).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import re
@@ -72,7 +75,13 @@ def main() -> None:
     parser.add_argument("--repo", type=Path, default=REPO, help="the checkout to run (default: this one)")
     parser.add_argument("--paper", action="store_true", help="also time the paper model on each grid")
     parser.add_argument("--second-goal", action="store_true", help="time a second goal on the same forecast")
+    parser.add_argument("--json", type=Path, action="append", default=[], help="write the rows here (with --plot: read)")
+    parser.add_argument("--label", action="append", default=[], help="with --plot: each --json file's legend")
+    parser.add_argument("--plot", type=Path, help="draw the cost per state-action of --json files to this PNG")
     args = parser.parse_args()
+    if args.plot is not None:
+        plot(args.plot, args.json, args.label)
+        return
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
           f"code: {args.repo}")
@@ -83,6 +92,7 @@ def main() -> None:
         print("| grid | states | state-actions | plan s (best) | process s (best) | peak RSS MB | "
               "us per state-action | paper plan s | ratio per state |")
         print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+        rows = []
         for size in args.sizes.split(","):
             nx, ny, radius = grid_of(size)
             out = Path(tmp) / "plan.lrpt"
@@ -103,6 +113,9 @@ def main() -> None:
                 paper, ratio = f"{paper_s:.3f}", f"{plan / max(paper_s, 1e-6):,.0f}"
             print(f"| {nx} x {ny} x 4 x 8 | {states:,} | {pairs:,} | {plan:.2f} | {wall:.2f} | {rss / 1e6:,.0f} | "
                   f"{plan / pairs * 1e6:.2f} | {paper} | {ratio} |", flush=True)
+            rows.append({"states": states, "pairs": pairs, "plan_s": plan, "process_s": wall, "rss_mb": rss / 1e6})
+            if args.json:
+                args.json[0].write_text(json.dumps(rows, indent=1))
         if args.second_goal:
             second_goal(args.repo, forecast, args.repeat)
 
@@ -133,6 +146,30 @@ print(f"first goal {{best[0]:.3f}} s, second goal {{best[1]:.3f}} s ({{100 * bes
     result = subprocess.run([sys.executable, "-c", code], cwd=repo, env=dict(os.environ, PYTHONPATH=str(repo)),
                             capture_output=True, text=True, check=True)
     print(result.stdout.strip())
+
+
+def plot(out: Path, files: list[Path], labels: list[str]) -> None:
+    """Microseconds of plan per state-action against the states, one line per --json file."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    for n, path in enumerate(files):
+        rows = json.loads(path.read_text())
+        ax.plot([r["states"] for r in rows], [r["plan_s"] / r["pairs"] * 1e6 for r in rows], "o-",
+                label=labels[n] if n < len(labels) else path.stem)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("states")
+    ax.set_ylabel("plan time per state-action (us)")
+    ax.set_title("Physical model, expected criterion, 2-core machine")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(f"wrote {out}")
 
 
 if __name__ == "__main__":

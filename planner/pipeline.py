@@ -102,9 +102,13 @@ class SampleCache:
     def __init__(self) -> None:
         self._key: tuple | None = None
         self._stats: SampleStats | None = None
+        self.hits = 0  # plans that reused the samples
 
     def get(self, key: tuple) -> SampleStats | None:
-        return self._stats if key == self._key else None
+        if key != self._key:
+            return None
+        self.hits += 1
+        return self._stats
 
     def put(self, key: tuple, stats: SampleStats) -> None:
         self._key, self._stats = key, stats
@@ -289,7 +293,9 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         timings["resample_s"] = time.perf_counter() - t
         t = time.perf_counter()
         goal_mask = _goal_mask(grid, u, v, request.goal, forecast.source)
-        key = (forecast.identity, step, grid.bbox, grid.nx, grid.ny, tuple(grid.depth_m), refine,
+        box = grid.bbox
+        key = (forecast.identity, index, (box.west_deg, box.south_deg, box.east_deg, box.north_deg), grid.nx, grid.ny,
+               tuple(grid.depth_m), refine, refs[0].member, request.variables, request.grid_file,
                request.settings.physical, request.settings.vehicle)
         stats = samples.get(key) if samples is not None else None
         if stats is None:

@@ -631,6 +631,27 @@ def test_make_plan_physical_end_to_end(physical_plans):
         assert all(step.duration_s > 0 for step in path[:-1])
 
 
+def test_a_second_goal_on_the_same_forecast_reuses_the_samples_and_plans_the_same(synthetic_forecast):
+    from planner.pipeline import PlanRequest, SampleCache, make_plan
+
+    box = BBox(west_deg=-118.26, south_deg=33.30, east_deg=-117.70, north_deg=33.70)
+    first = PlanRequest(forecast_path=synthetic_forecast, goal=Goal(lat_deg=33.40, lon_deg=-117.80, depth_m=0.0),
+                        depths_m=(0.0, 5.0), settings=PlanSettings(model="physical", criterion="expected"), bbox=box,
+                        nx=15, ny=11, time_index=0)
+    second = replace(first, goal=Goal(lat_deg=33.60, lon_deg=-118.10, depth_m=5.0, radius_cells=1))
+    cache = SampleCache()
+    a = make_plan(first, samples=cache)
+    b = make_plan(second, samples=cache)
+    assert cache.hits == 1
+    alone = make_plan(second)
+    assert b.table.to_bytes() == alone.table.to_bytes()
+    np.testing.assert_array_equal(b.solution.value_wh, alone.solution.value_wh)
+    assert not np.array_equal(a.solution.value_wh, b.solution.value_wh)
+    # Another step of the forecast is another forecast: sampled again.
+    make_plan(replace(second, time_index=1), samples=cache)
+    assert cache.hits == 1
+
+
 # --------------------------------------------------------------------------- regressions: goal entry past the move, ties at the cost floor
 
 
