@@ -446,7 +446,9 @@ def _finish(  # pragma: no cover
     return state, xn, yn, t
 
 
-@numba.njit(cache=True, parallel=True)
+# Fused multiply-adds and reciprocals where LLVM likes (about a fifth faster; energies move by
+# 1e-13 Wh), but never the flags that assume no NaN or infinity: NaN is how land shows.
+@numba.njit(cache=True, parallel=True, fastmath={"contract", "arcp", "nsz", "afn"})
 def _sample_cells(  # pragma: no cover
     cells: _I64, uf: _F64, vf: _F64, wet: _Mask, water: _Mask, goal: _Mask, refine: int, lat0: float, dlat: float,
     dlon_rad: float, dy_m: float, depth_m: _F64, course_rad: _F64, offsets: _F64, members: _F64, speed: float,
