@@ -8,12 +8,14 @@ grid) and never imports the solver either.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import math
 import os
 import struct
 import zlib
-from dataclasses import dataclass, field
+from bisect import bisect_right
+from dataclasses import dataclass, field, replace
 from dataclasses import fields as dataclass_fields
 from functools import cached_property
 from pathlib import Path
@@ -28,7 +30,9 @@ from planner.contract.errors import TableError
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
 
 MAGIC = b"LRAUVPT\x00"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 1  # a stationary plan; its files are what they always were
+TIMED_VERSION = 2  # a time-varying plan: one slice of actions per forecast time (docs/policy-table.md)
+MAX_SLICES = 10_000
 FLAG_ZLIB = 0x0001
 _PREAMBLE = struct.Struct("<8sHHI")  # magic, version, flags, header length
 _PAYLOAD = struct.Struct("<II")  # stored payload length, raw payload length
@@ -39,6 +43,9 @@ MAX_STATES = 1 << 31
 CELL_MARGIN = 0.1
 
 LookupReason = Literal["ok", "at_goal", "unreachable", "outside_grid", "land"]
+# Which slice of a time-varying table holds at a time: the nearest slice's time ("in_horizon"); the
+# first slice before it, or while the vehicle has no UTC time; the last slice past it.
+SliceStatus = Literal["stationary", "in_horizon", "before_start", "past_horizon", "time_unknown"]
 # The vehicle figures a physical plan depends on (``VehicleParams``' other fields are the simulator's alone).
 PHYSICAL_VEHICLE_KEYS = ("cruise_speed_m_s", "max_speed_m_s", "yaw_rate_deg_s", "glide_rate_m_s", "hotel_w",
                          "propulsion_w", "buoyancy_w", "battery_wh")
@@ -51,6 +58,16 @@ class Lookup:
     action: Action
     reason: LookupReason
     state: tuple[int, int, int, int] | None  # (l, j, i, k) as exported, None outside the grid
+
+
+@dataclass(frozen=True, eq=False, slots=True)
+class TimeSlice:
+    """The stationary plan that holds at one time: ``table`` is slice ``index`` of a time-varying table
+    (or the table itself), ``status`` says why that slice."""
+
+    table: PolicyTable
+    index: int
+    status: SliceStatus
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -83,6 +100,10 @@ class PolicyTable:
     water: NDArray[np.bool_] = field(repr=False)  # (L, ny, nx)
     # Physical plans: {"vehicle": {...}, "sampling": {...}} (docs/policy-table.md); None for the paper model.
     physical: dict[str, dict[str, float | int | bool | None]] | None = None
+    # Time-varying plans: the UTC time of each slice, and its actions (T, L, ny, nx, 8); ``actions``
+    # is the first slice. Empty and None for a stationary plan.
+    slice_times: tuple[str, ...] = ()
+    slices: NDArray[np.uint8] | None = field(default=None, repr=False)
     # Derived from the geometry in __post_init__, for the per-message lookups.
     _bearings: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _bearing_rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
@@ -94,6 +115,14 @@ class PolicyTable:
             raise TableError(f"table arrays: expected {shape + (N_HEADINGS,)} and {shape}; got {self.actions.shape} and {self.water.shape}")
         for arr in (self.actions, self.water):
             arr.setflags(write=False)
+        if self.slices is not None:
+            n = self.slices.shape[0]
+            if self.slices.shape[1:] != self.actions.shape or len(self.slice_times) != n or n < 2:
+                raise TableError(f"table slices: expected (T >= 2,) + {self.actions.shape} and T times; got "
+                                 f"{self.slices.shape} and {len(self.slice_times)} times")
+            self.slices.setflags(write=False)
+        elif self.slice_times:
+            raise TableError("table slices: slice times without slices")
         dx_m, dy_m = cell_size_m(self.lat_deg, self.dlon_deg, self.dlat_deg)
         bearings = bearings_deg(dx_m, dy_m)
         bearings.setflags(write=False)
@@ -151,6 +180,60 @@ class PolicyTable:
             water=np.ascontiguousarray(model.water),
             physical=physical,
         )
+
+    # -- time -----------------------------------------------------------------------
+    def with_slices(self, times_utc: tuple[str, ...], actions: NDArray[np.uint8]) -> PolicyTable:
+        """This table made time-varying: slice ``n`` (actions ``(L, ny, nx, 8)``) holds around ``times_utc[n]``."""
+        stack = np.ascontiguousarray(actions, dtype=np.uint8)
+        _slice_unix_s(times_utc, "slice times")  # ISO 8601 UTC, increasing
+        return replace(self, actions=np.ascontiguousarray(stack[0]), slices=stack, slice_times=tuple(times_utc))
+
+    @property
+    def time_varying(self) -> bool:
+        return self.slices is not None
+
+    @property
+    def n_slices(self) -> int:
+        return 1 if self.slices is None else int(self.slices.shape[0])
+
+    @cached_property
+    def slice_unix_s(self) -> tuple[float, ...]:
+        """Each slice's time, Unix seconds (empty for a stationary table)."""
+        return _slice_unix_s(self.slice_times, "slice times") if self.slice_times else ()
+
+    @cached_property
+    def _views(self) -> list[PolicyTable | None]:
+        return [None] * self.n_slices
+
+    def slice_table(self, index: int) -> PolicyTable:
+        """Slice ``index`` as a stationary table, with this file's identity (``crc32``): made once."""
+        if self.slices is None:
+            return self
+        view = self._views[index]
+        if view is None:
+            view = replace(self, actions=self.slices[index], slices=None, slice_times=())
+            view.__dict__["crc32"] = self.crc32
+            self._views[index] = view
+        return view
+
+    def slice_at(self, unix_s: float | None) -> TimeSlice:
+        """The slice that holds at a UTC time: the one whose time is nearest (a slice is the plan for
+        the vehicle at its time, and the actions change midway between two slices); the first one
+        before the first slice or while the time is unknown; the last one past the last (the plan's
+        horizon), whose values assume its currents last (docs/time-varying.md)."""
+        if self.slices is None:
+            return TimeSlice(self, 0, "stationary")
+        times = self.slice_unix_s
+        if unix_s is None or not math.isfinite(unix_s):
+            return TimeSlice(self.slice_table(0), 0, "time_unknown")
+        if unix_s < times[0]:
+            return TimeSlice(self.slice_table(0), 0, "before_start")
+        if unix_s > times[-1]:
+            return TimeSlice(self.slice_table(len(times) - 1), len(times) - 1, "past_horizon")
+        n = bisect_right(times, unix_s) - 1
+        if n + 1 < len(times) and times[n + 1] - unix_s < unix_s - times[n]:
+            n += 1
+        return TimeSlice(self.slice_table(n), n, "in_horizon")
 
     # -- geometry -------------------------------------------------------------------
     @property
@@ -295,17 +378,20 @@ class PolicyTable:
         }
         if self.physical is not None:  # optional: paper tables keep the bytes they always had
             out["physical"] = {part: dict(values) for part, values in self.physical.items()}
+        if self.slices is not None:  # version 2 only
+            out["time"] = {"slices_utc": list(self.slice_times), "lookup": "nearest"}
         return out
 
     # -- bytes ----------------------------------------------------------------------
     def to_bytes(self, *, compress: bool = True) -> bytes:
         """Serialise: preamble, JSON header, 1-bit water mask + 4-bit actions, CRC32."""
         header = json.dumps(self.header(), sort_keys=True, separators=(",", ":")).encode("utf-8")
-        raw = _pack_payload(self.water, self.actions)
+        raw = _pack_payload(self.water, self.actions if self.slices is None else _deltas(self.slices))
         stored = zlib.compress(raw, 9) if compress else raw
+        version = FORMAT_VERSION if self.slices is None else TIMED_VERSION
         body = b"".join(
             [
-                _PREAMBLE.pack(MAGIC, FORMAT_VERSION, FLAG_ZLIB if compress else 0, len(header)),
+                _PREAMBLE.pack(MAGIC, version, FLAG_ZLIB if compress else 0, len(header)),
                 header,
                 _PAYLOAD.pack(len(stored), len(raw)),
                 stored,
@@ -322,8 +408,9 @@ class PolicyTable:
         magic, version, flags, header_len = _PREAMBLE.unpack_from(data, 0)
         if magic != MAGIC:
             raise TableError(f"{name}: not a policy table: magic {magic!r}, expected {MAGIC!r}")
-        if version != FORMAT_VERSION:
-            raise TableError(f"{name}: format version {version} is not supported; this reader reads version {FORMAT_VERSION}")
+        if version not in (FORMAT_VERSION, TIMED_VERSION):
+            raise TableError(f"{name}: format version {version} is not supported; this reader reads versions "
+                             f"{FORMAT_VERSION} and {TIMED_VERSION}")
         if flags & ~FLAG_ZLIB:
             raise TableError(f"{name}: unknown flags 0x{flags:04x}")
         pos = _PREAMBLE.size + header_len
@@ -348,8 +435,16 @@ class PolicyTable:
             fields = _header_fields(header)
         except TableError as exc:
             raise TableError(f"{name}: header {exc}") from None
+        times = fields.get("slice_times", ())
+        if (version == TIMED_VERSION) != bool(times):
+            raise TableError(f"{name}: format version {version} " + ("needs the header's time.slices_utc" if version == TIMED_VERSION
+                             else "has no time slices; the header's time.slices_utc needs version 2"))
+        n_slices = max(len(times), 1)
+        n_states = len(fields["depth_m"]) * fields["ny"] * fields["nx"] * N_HEADINGS
+        if n_states * n_slices > MAX_STATES:
+            raise TableError(f"{name}: {n_slices} slices of {n_states:,} states exceed the limit of {MAX_STATES:,} actions")
         shape = (len(fields["depth_m"]), fields["ny"], fields["nx"])
-        expected = _payload_len(shape[0] * shape[1] * shape[2])
+        expected = _payload_len(shape[0] * shape[1] * shape[2], n_slices)
         if raw_len != expected:
             raise TableError(
                 f"{name}: payload declared as {raw_len:,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
@@ -375,7 +470,9 @@ class PolicyTable:
                 f"{name}: payload is {len(raw):,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
                 f"{N_HEADINGS} needs {expected:,}"
             )
-        water, actions = _unpack_payload(raw, shape)
+        water, actions = _unpack_payload(raw, shape, n_slices)
+        if n_slices > 1:
+            actions = np.bitwise_xor.accumulate(actions, axis=0)  # each slice was stored as its change from the one before
         if np.any(actions > max(Action)):
             raise TableError(f"{name}: action codes above {int(max(Action))} in the payload")
         if np.any(actions > Action.UNREACHABLE):
@@ -385,9 +482,12 @@ class PolicyTable:
             if (fields.get("physical") or {}).get("sampling", {}).get("course_offsets") is False:
                 raise TableError(f"{name}: action codes above {int(Action.UNREACHABLE)} (course offsets) in a table "
                                  "whose header says physical.sampling.course_offsets false")
-        if np.any(actions[~water] != Action.UNREACHABLE):
+        if np.any(actions[..., ~water, :] != Action.UNREACHABLE):
             raise TableError(f"{name}: land cells must carry UNREACHABLE (spec section 6)")
-        table = cls(actions=actions, water=water, **fields)
+        if n_slices > 1:
+            table = cls(actions=np.ascontiguousarray(actions[0]), water=water, slices=actions, **fields)
+        else:
+            table = cls(actions=actions, water=water, **fields)
         if flags & FLAG_ZLIB:
             # A compressed file is the serialisation ``crc32`` names: keep its checked CRC rather
             # than compress the whole table again (12 ms at 320,000 states, on the executive's loop).
@@ -422,30 +522,42 @@ def read_table_file(path: str | os.PathLike[str]) -> bytes:
         raise TableError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
 
 
-def _payload_len(n_cells: int) -> int:
-    return (n_cells + 7) // 8 + (n_cells * N_HEADINGS + 1) // 2
+def _payload_len(n_cells: int, n_slices: int = 1) -> int:
+    return (n_cells + 7) // 8 + n_slices * ((n_cells * N_HEADINGS + 1) // 2)
+
+
+def _deltas(slices: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """The first slice, then each slice XOR the one before: the actions that stay the same are zeros,
+    which zlib stores in a few bits (a plan changes little from one forecast hour to the next)."""
+    out = slices.copy()
+    out[1:] ^= slices[:-1]
+    return out
 
 
 def _pack_payload(water: NDArray[np.bool_], actions: NDArray[np.uint8]) -> bytes:
-    """Water bits (little bit order, [l, j, i]) then actions, two per byte, low nibble first."""
+    """Water bits (little bit order, [l, j, i]) then actions, two per byte, low nibble first; a
+    time-varying table's slices one after another, each padded to whole bytes."""
     mask = np.packbits(np.ascontiguousarray(water).ravel(), bitorder="little")
-    flat = np.ascontiguousarray(actions).ravel().astype(np.uint8)
-    if flat.size % 2:
-        flat = np.concatenate([flat, np.zeros(1, dtype=np.uint8)])
-    nibbles = (flat[0::2] & 0x0F) | ((flat[1::2] & 0x0F) << 4)
+    per_slice = int(np.prod(water.shape)) * N_HEADINGS
+    flat = np.ascontiguousarray(actions).astype(np.uint8).reshape(-1, per_slice)
+    if per_slice % 2:
+        flat = np.concatenate([flat, np.zeros((flat.shape[0], 1), dtype=np.uint8)], axis=1)
+    nibbles = (flat[:, 0::2] & 0x0F) | ((flat[:, 1::2] & 0x0F) << 4)
     return mask.tobytes() + nibbles.astype(np.uint8).tobytes()
 
 
-def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int]) -> tuple[NDArray[np.bool_], NDArray[np.uint8]]:
+def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int], n_slices: int = 1) -> tuple[NDArray[np.bool_], NDArray[np.uint8]]:
+    """Inverse of ``_pack_payload``: actions ``cell_shape + (8,)``, or ``(n_slices,) + ...`` when sliced."""
     n_cells = int(np.prod(cell_shape))
     n_mask = (n_cells + 7) // 8
     buf = np.frombuffer(raw, dtype=np.uint8)
     water = np.unpackbits(buf[:n_mask], bitorder="little")[:n_cells].astype(bool).reshape(cell_shape)
-    packed = buf[n_mask:]
-    actions = np.empty(packed.size * 2, dtype=np.uint8)
-    actions[0::2] = packed & 0x0F
-    actions[1::2] = packed >> 4
-    return water, actions[: n_cells * N_HEADINGS].reshape(cell_shape + (N_HEADINGS,))
+    packed = buf[n_mask:].reshape(n_slices, -1)
+    actions = np.empty((n_slices, packed.shape[1] * 2), dtype=np.uint8)
+    actions[:, 0::2] = packed & 0x0F
+    actions[:, 1::2] = packed >> 4
+    out = actions[:, : n_cells * N_HEADINGS].reshape((n_slices,) + cell_shape + (N_HEADINGS,))
+    return water, (out[0] if n_slices == 1 else out)
 
 
 def _header_fields(header: Any) -> dict[str, Any]:
@@ -495,6 +607,15 @@ def _header_fields(header: Any) -> dict[str, Any]:
     fields["forecast_identity"] = _text(_key(forecast, "identity", "forecast"), "forecast.identity")
     when = _key(forecast, "time", "forecast")
     fields["forecast_time"] = None if when is None else _text(when, "forecast.time")
+    if "time" in top:  # version 2: a time-varying plan
+        time_part = _section(top["time"], "time")
+        times = _key(time_part, "slices_utc", "time")
+        if not isinstance(times, list):
+            raise TableError(f"time.slices_utc: expected a list of ISO 8601 UTC times; got {times!r}"[:200])
+        _slice_unix_s(times, "time.slices_utc")
+        if _key(time_part, "lookup", "time") != "nearest":
+            raise TableError(f"time.lookup: expected \"nearest\"; got {time_part['lookup']!r}"[:200])
+        fields["slice_times"] = tuple(times)
     if "physical" in top:  # optional (physical plans); older readers never saw it
         physical = _section(top["physical"], "physical")
         fields["physical"] = {}
@@ -547,3 +668,21 @@ def _int(value: Any, key: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise TableError(f"{key}: expected an integer; got {value!r}")
     return value
+
+
+def _slice_unix_s(times_utc: tuple[str, ...] | list[Any], key: str) -> tuple[float, ...]:
+    """Unix seconds of ISO 8601 UTC times (``2026-01-15T03:00:00Z``), strictly increasing; TableError naming ``key``."""
+    if not 2 <= len(times_utc) <= MAX_SLICES:
+        raise TableError(f"{key}: expected 2 to {MAX_SLICES:,} slice times; got {len(times_utc)}")
+    out: list[float] = []
+    for n, text in enumerate(times_utc):
+        if not isinstance(text, str) or not text.endswith("Z"):
+            raise TableError(f"{key}[{n}]: expected an ISO 8601 UTC time like 2026-01-15T03:00:00Z; got {text!r}"[:200])
+        try:
+            when = dt.datetime.fromisoformat(text[:-1]).replace(tzinfo=dt.UTC)
+        except ValueError:
+            raise TableError(f"{key}[{n}]: expected an ISO 8601 UTC time like 2026-01-15T03:00:00Z; got {text!r}"[:200]) from None
+        out.append(when.timestamp())
+        if n and out[-1] <= out[-2]:
+            raise TableError(f"{key}[{n}]: {text} is not after the slice before it ({times_utc[n - 1]})")
+    return tuple(out)
