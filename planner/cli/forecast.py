@@ -1,8 +1,9 @@
-"""``lrauv forecast``: describe a forecast file, or write a synthetic one (SCB, double gyre, ensemble).
+"""``lrauv forecast``: describe a forecast file, or write a synthetic one (SCB, double gyre, tidal channel, ensemble).
 
-The options of ``planner.forecast.synthetic.double_gyre.DoubleGyreSettings`` and of
-``planner.forecast.synthetic.ensemble`` are declared here, so that building the parser
-imports no xarray; values are checked by the settings, and a bad one names its option.
+The options of ``planner.forecast.synthetic.double_gyre.DoubleGyreSettings``,
+``planner.forecast.synthetic.tidal.TidalSettings`` and of ``planner.forecast.synthetic.ensemble``
+are declared here, so that building the parser imports no xarray; values are checked by the
+settings, and a bad one names its option.
 """
 
 from __future__ import annotations
@@ -29,6 +30,26 @@ GYRE_OPTIONS = {
     "eps": "--eps",
     "period_h": "--period-h",
     "phase_rad": "--phase-rad",
+}
+# TidalSettings field (or check name, or with_forecast_error argument) -> the option that sets it.
+TIDAL_OPTIONS = {
+    "bbox": "--bbox",
+    "spacing_deg": "--spacing-deg",
+    "depths_m": "--depths",
+    "hours": "--hours",
+    "step_h": "--step-h",
+    "hours, step_h": "--hours/--step-h",
+    "issue_time": "--issue-time",
+    "amplitude_m_s": "--amplitude-m-s",
+    "period_h": "--period-h",
+    "phase_rad": "--phase-rad",
+    "residual_m_s": "--residual-m-s",
+    "mouth_width_m": "--mouth-width-m",
+    "neck_width_m": "--neck-width-m",
+    "neck_length_m": "--neck-length-m",
+    "bbox, mouth_width_m": "--bbox/--mouth-width-m",
+    "phase_error_h": "--phase-error-h",
+    "amplitude_error": "--amplitude-error",
 }
 GYRE_ONLY = ("peak_speed_m_s", "eps", "spread", "period_h", "step_h", "spacing_deg", "bbox", "depths", "issue_time")
 SCB_ONLY = ("issue",)
@@ -59,6 +80,26 @@ def add_parser(sub: Subcommands) -> None:
     gyre.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.467)")
     gyre.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
     gyre.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+
+    tidal = fsub.add_parser("tidal", help="write an M2 tidal current through a channel with a constriction as a forecast")
+    tidal.add_argument("out", type=Path)
+    tidal.add_argument("--amplitude-m-s", type=float, help="tidal current amplitude at the neck, m/s (default 0.8)")
+    tidal.add_argument("--period-h", type=float, help="tidal period in hours (default M2, 12.4206)")
+    tidal.add_argument("--phase-rad", type=float, help="tidal phase at the issue time, radians (default 0: flood east at full strength)")
+    tidal.add_argument("--residual-m-s", type=float, help="steady residual current at the neck, m/s, positive east (default 0.05)")
+    tidal.add_argument("--mouth-width-m", type=float, help="channel width at the box's east and west edges, m (default 9000)")
+    tidal.add_argument("--neck-width-m", type=float, help="channel width at the constriction, m (default 6000)")
+    tidal.add_argument("--neck-length-m", type=float, help="e-folding half-length of the constriction, m (default 8000)")
+    tidal.add_argument("--phase-error-h", type=float,
+                       help="forecast error: the tide runs H hours early (phase + 2 pi H / period; default 0)")
+    tidal.add_argument("--amplitude-error", type=float,
+                       help="forecast error: amplitude times 1 + F, F >= -1 (default 0)")
+    tidal.add_argument("--hours", type=float, help="forecast length in hours (default 72)")
+    tidal.add_argument("--step-h", type=float, help="time step in hours (default 1)")
+    tidal.add_argument("--spacing-deg", type=float, help="grid spacing in degrees (default 0.005)")
+    tidal.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.5)")
+    tidal.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
+    tidal.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
 
     ens = fsub.add_parser("ensemble", help="write a synthetic forecast ensemble: one file, u/v with a leading member dimension")
     ens.add_argument("out", type=Path)
@@ -97,6 +138,11 @@ def run(args: argparse.Namespace) -> int:
 
         print(f"wrote {write_gyre(args.out, settings_from_args(args))}")
         return 0
+    if args.forecast_command == "tidal":
+        from planner.forecast.synthetic.tidal import write_tidal
+
+        print(f"wrote {write_tidal(args.out, tidal_settings_from_args(args))}")
+        return 0
     from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
@@ -114,12 +160,7 @@ def settings_from_args(args: argparse.Namespace) -> Any:
         value = getattr(args, name, None)
         return getattr(default, name) if value is None else value
 
-    west, south, east, north = default.west_deg, default.south_deg, default.east_deg, default.north_deg
-    if getattr(args, "bbox", None) is not None:
-        west, south, east, north = _floats(args.bbox, 4, "--bbox")
-    depths = default.depths_m
-    if getattr(args, "depths", None) is not None:
-        depths = tuple(_floats(args.depths, None, "--depths"))
+    west, south, east, north, depths = _box_and_depths(args, default)
     try:
         return DoubleGyreSettings(
             west_deg=west, south_deg=south, east_deg=east, north_deg=north, depths_m=depths,
@@ -132,6 +173,36 @@ def settings_from_args(args: argparse.Namespace) -> Any:
         if field is None:
             raise
         raise PlannerError(f"{GYRE_OPTIONS.get(field, field)}: {exc}") from None
+
+
+def tidal_settings_from_args(args: argparse.Namespace) -> Any:
+    """``TidalSettings`` from ``lrauv forecast tidal``'s options, forecast error applied; bad values name the option."""
+    from planner.forecast.synthetic.tidal import TidalSettings, with_forecast_error
+
+    default = TidalSettings()  # the value of each option not given
+
+    def given(name: str) -> Any:  # argparse values are untyped; the settings check them
+        value = getattr(args, name, None)
+        return getattr(default, name) if value is None else value
+
+    west, south, east, north, depths = _box_and_depths(args, default)
+    try:
+        settings = TidalSettings(
+            west_deg=west, south_deg=south, east_deg=east, north_deg=north, depths_m=depths,
+            spacing_deg=given("spacing_deg"), hours=given("hours"), step_h=given("step_h"),
+            issue_time=given("issue_time"), amplitude_m_s=given("amplitude_m_s"), period_h=given("period_h"),
+            phase_rad=given("phase_rad"), residual_m_s=given("residual_m_s"), mouth_width_m=given("mouth_width_m"),
+            neck_width_m=given("neck_width_m"), neck_length_m=given("neck_length_m"),
+        )
+        phase_error_h = getattr(args, "phase_error_h", None)
+        amplitude_error = getattr(args, "amplitude_error", None)
+        return with_forecast_error(settings, phase_error_h=0.0 if phase_error_h is None else phase_error_h,
+                                   amplitude_error=0.0 if amplitude_error is None else amplitude_error)
+    except PlannerError as exc:
+        field = getattr(exc, "field", None)  # the settings' errors carry the field they refuse
+        if field is None:
+            raise
+        raise PlannerError(f"{TIDAL_OPTIONS.get(field, field)}: {exc}") from None
 
 
 def write_ensemble_from_args(args: argparse.Namespace) -> pathlib.Path:
@@ -168,6 +239,17 @@ def write_ensemble_from_args(args: argparse.Namespace) -> pathlib.Path:
             raise
         raise PlannerError(f"{_option(argument)}: {exc}") from None
     raise PlannerError(f"--kind: expected gyre or scb; got {kind!r}")
+
+
+def _box_and_depths(args: argparse.Namespace, default: Any) -> tuple[float, float, float, float, tuple[float, ...]]:
+    """``--bbox`` and ``--depths`` as given, else the default settings' box and depths."""
+    west, south, east, north = default.west_deg, default.south_deg, default.east_deg, default.north_deg
+    if getattr(args, "bbox", None) is not None:
+        west, south, east, north = _floats(args.bbox, 4, "--bbox")
+    depths = default.depths_m
+    if getattr(args, "depths", None) is not None:
+        depths = tuple(_floats(args.depths, None, "--depths"))
+    return west, south, east, north, depths
 
 
 def _option(name: str) -> str:

@@ -272,7 +272,7 @@ TABLE_CASES: list[tuple[str, Callable[[bytes], bytes], tuple[str, ...]]] = [
     ("a flipped payload byte", lambda d: _flip(len(d) - 40)(d), ("CRC32 mismatch", "corrupt")),
     ("a flipped header byte", _flip(40), ("CRC32 mismatch",)),
     ("wrong magic", lambda d: b"NOTATABL" + d[8:], ("not a policy table: magic b'NOTATABL'",)),
-    ("future version", lambda d: d[:8] + struct.pack("<H", 2) + d[10:], ("format version 2 is not supported",)),
+    ("future version", lambda d: d[:8] + struct.pack("<H", 3) + d[10:], ("format version 3 is not supported",)),
     ("unknown flag", lambda d: d[:10] + struct.pack("<H", 0x0003) + d[12:], ("unknown flags 0x0003",)),
     ("header not JSON", _raw_header(b"{grid: 1"), ("header is not valid JSON",)),
     ("header not UTF-8", _raw_header(b"\xff\xfe{}"), ("header is not valid JSON",)),
