@@ -43,6 +43,7 @@ from planner.physical.model import (
     refine_factor,
     sample_transitions,
 )
+from planner.physical.horizon import HorizonSolution, solve_horizon
 from planner.physical.solve import PhysicalSolution, solve_physical
 
 if TYPE_CHECKING:
@@ -90,6 +91,7 @@ class PlanResult:
     solution: Solution | PhysicalSolution
     table: PolicyTable
     timings_s: dict[str, float]
+    horizon: HorizonSolution | None = None  # a time-varying plan's slices; ``solution`` is its first
 
 
 class SampleCache:
@@ -274,6 +276,11 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
     if len(refs) > 1:
         return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)
+    if request.settings.time_varying:
+        if forecast is None:  # every step: the slices are the forecast's own steps
+            forecast = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
+                                     member=refs[0].member, bbox=request.bbox)
+        return _plan_horizon(request, forecast, choose_time_index(forecast, request), timings, t, progress)
     if forecast is None:
         forecast, index = open_step(request, refs[0])
     else:
@@ -330,6 +337,61 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     )
 
 
+def slice_steps(forecast: Forecast, index: int, horizon_h: float) -> list[int]:
+    """The forecast steps of a time-varying plan: from ``index`` to ``horizon_h`` hours after it."""
+    t0 = float(forecast.time_s[index])
+    steps = [n for n in range(index, forecast.time_s.size) if forecast.time_s[n] - t0 <= horizon_h * 3600.0 + 1e-6]
+    if len(steps) < 2:
+        raise ForecastError(f"{forecast.source}: a time-varying plan needs two or more forecast steps within "
+                            f"planning.horizon_h = {horizon_h:g} h of step {index}; the file has {forecast.time_s.size} "
+                            f"step(s){'' if forecast.time_s.size < 2 else f', {(forecast.time_s[1] - forecast.time_s[0]) / 3600:g} h apart'}")
+    return steps
+
+
+def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings: dict[str, float], t: float,
+                  progress: bool) -> PlanResult:
+    """A time-varying physical plan (``planner.physical.horizon``): a slice per forecast step."""
+    if forecast.time_origin is None:
+        raise ForecastError(f"{forecast.source}: a time-varying plan needs dated forecast steps (its table is looked up "
+                            "by UTC time); the file's time axis has no reference date")
+    settings = request.settings
+    steps = slice_steps(forecast, index, settings.horizon_h)
+    timings["load_s"] = time.perf_counter() - t
+    grid = planning_grid(forecast, request)
+    check_coverage(forecast, grid)
+    refine = refine_factor(grid, native_spacing_deg(forecast))
+    fine = fine_grid(grid, refine)
+    t = time.perf_counter()
+    uf0, vf0 = resample(forecast, fine, time_index=forecast.step_index(steps[0]))
+    u, v = uf0[:, ::refine, ::refine], vf0[:, ::refine, ::refine]
+    goal_mask = _goal_mask(grid, u, v, request.goal, forecast.source)
+    timings["resample_s"] = time.perf_counter() - t
+    _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states, "
+                    f"{len(steps)} time slices over {(forecast.time_s[steps[-1]] - forecast.time_s[steps[0]]) / 3600:g} h")
+
+    def model_at(n: int) -> PhysicalModel:
+        uf, vf = (uf0, vf0) if n == 0 else resample(forecast, fine, time_index=forecast.step_index(steps[n]))
+        stats = sample_transitions(uf, vf, grid, settings, refine=refine)
+        stats = enter_goal(stats, uf, vf, grid, settings, refine=refine, goal_mask=goal_mask)
+        return assemble(stats, grid, settings, refine=refine)
+
+    t = time.perf_counter()
+    times = np.array([forecast.time_s[n] - forecast.time_s[steps[0]] for n in steps], dtype=np.float64)
+    horizon = solve_horizon(model_at, times, request.goal, progress=lambda text: None)
+    timings["transitions_s"] = horizon.timings_s["transitions_s"]
+    timings["plan_s"] = time.perf_counter() - t
+    solution = horizon.first
+    _note(progress, f"physical model: {solution.model.n_pairs:,} state-actions in the first slice, "
+                    f"{solution.model.samples_per_action} samples each; {sum(horizon.sweeps)} sweeps over the slices")
+    slice_times = tuple(str(forecast_time_iso(forecast, forecast.step_index(n))) for n in steps)
+    table = PolicyTable.from_solution(
+        solution, forecast_source=forecast.source, forecast_identity=forecast.identity,
+        forecast_time=slice_times[0],
+    ).with_slices(slice_times, horizon.action)
+    return PlanResult(forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=solution.model,
+                      solution=solution, table=table, timings_s=timings, horizon=horizon)
+
+
 def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, workers: int | None = None,
                         progress: bool = False, samples: SampleCache | None = None) -> PlanResult:
     """``make_plan``, several forecast members sampled where ``scheduler`` says (``planner.cluster.open_runner``).
@@ -338,6 +400,8 @@ def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, w
     """
     refs = members_of(request)
     request = replace(request, members=tuple(refs))
+    if len(refs) > 1 and request.settings.time_varying:
+        raise PlannerError(f"a time-varying plan takes one forecast (its steps are the slices); got {len(refs)} members")
     if len(refs) == 1:
         return make_plan(request, progress=progress, samples=samples)
     with open_runner(scheduler, workers=workers) as runner:

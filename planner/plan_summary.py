@@ -18,8 +18,9 @@ def summary_lines(result: PlanResult, *, out: Path, size: int) -> list[str]:
     water_states = int(result.model.water.sum()) * 8
     reachable = int(sol.reachable.sum())
     raw = len(result.table.to_bytes(compress=False))
+    slices = f" x {result.table.n_slices} time slices" if result.table.time_varying else ""
     lines = [
-        f"table      {out}  ({size:,} bytes; {raw:,} uncompressed; {result.grid.n_states:,} states)",
+        f"table      {out}  ({size:,} bytes; {raw:,} uncompressed; {result.grid.n_states:,} states{slices})",
         (f"forecast   {result.table.forecast_source} [{result.table.forecast_identity}] step {result.time_index}"
          f" ({result.table.forecast_time or 'no reference date'})"),
         (f"grid       {result.grid.nx} x {result.grid.ny} cells x {result.grid.n_layers} layers"
@@ -51,7 +52,12 @@ def model_lines(result: PlanResult) -> list[str]:
          f" currents{f' x {m.members} forecast members' if m.members > 1 else ''}),"
          f" currents {m.refine}x finer than the grid"),
     ]
-    if s.criterion == "expected":
+    h = result.horizon
+    if h is not None:
+        times = result.table.slice_times
+        lines.append(f"time       {h.n_slices} slices, {times[0]} to {times[-1]} (the forecast's own steps); past the"
+                     f" last, its stationary plan; {sum(h.sweeps):,} Gauss-Seidel sweeps over the earlier slices")
+    elif s.criterion == "expected":
         lines.append(f"solve      value iteration: {sol.sweeps} sweeps, then policy iteration: {sol.iterations} "
                      f"iterations, residual {sol.residual_wh:.2g} Wh")
     return lines

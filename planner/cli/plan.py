@@ -58,6 +58,9 @@ def add_parser(sub: Subcommands) -> None:
     plan.add_argument("--uncertainty", choices=["lateral", "none"])
     plan.add_argument("--costs", type=costs, help="e.g. drift=0,forward=4,rotate=10,glide=2")
     plan.add_argument("--calm-speed", type=float, help="calm threshold in m/s (default 0.01)")
+    plan.add_argument("--time-varying", action="store_true", default=None,
+                      help="physical model: a plan with time in the state, a slice per forecast step (docs/time-varying.md)")
+    plan.add_argument("--horizon-h", type=float, help="time-varying plan: hours of forecast it spans (default 72)")
     plan.add_argument("--out", type=Path, help="policy table to write (default: <mission name>.lrpt)")
     plan.add_argument("--no-compress", action="store_true", help="store the table payload uncompressed")
     plan.add_argument("--export-values", type=Path, help="also write the arrays of spec section 8 to this .npz")
@@ -172,6 +175,8 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
         uncertainty=args.uncertainty or base.uncertainty,
         costs=cost,
         calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
+        time_varying=bool(args.time_varying) or base.time_varying,
+        horizon_h=base.horizon_h if args.horizon_h is None else args.horizon_h,
     )
     return PlanRequest(
         forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,

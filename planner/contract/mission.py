@@ -385,7 +385,8 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         ),
     )
 
-    pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical"})
+    pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical",
+                                  "time_varying", "horizon_h"})
     model = pl.choice("model", MODEL_OPTIONS, "paper")
     criterion_text = pl.text("criterion", "robust")
     if criterion_text not in CRITERIA[model]:
@@ -401,6 +402,9 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     except LrauvError as exc:
         key = str(exc).split(":", 1)[0]
         raise doc.error(f"planning.{key}", str(exc).split(": ", 1)[-1]) from None
+    time_varying = pl.boolean("time_varying", False)
+    if time_varying and model != "physical":
+        raise doc.error("planning.time_varying", f"needs planning.model physical (its transitions carry durations); got {model!r}")
     settings = PlanSettings(
         model=model,
         criterion=criterion,
@@ -409,6 +413,8 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         calm_speed_m_s=pl.number("calm_speed_m_s", 0.01, minimum=0, unit="m/s"),
         physical=_physical(doc, pl),
         vehicle=vehicle.params(),
+        time_varying=time_varying,
+        horizon_h=pl.number("horizon_h", 72.0, minimum=1, unit="h"),
     )
 
     goals_raw = top.raw("goals")

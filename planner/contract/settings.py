@@ -154,8 +154,19 @@ class PlanSettings:
     # The physical model's sampling and the vehicle it plans for (unused by the paper model).
     physical: PhysicalSettings = field(default_factory=PhysicalSettings)
     vehicle: VehicleParams = field(default_factory=VehicleParams)
+    # A time-varying physical plan (docs/time-varying.md): a slice per forecast step over the next
+    # ``horizon_h`` hours; False plans on one forecast step and assumes its current lasts.
+    time_varying: bool = False
+    horizon_h: float = 72.0
 
     def __post_init__(self) -> None:
+        if not isinstance(self.time_varying, bool):
+            raise ContractError(f"time_varying: expected true or false; got {self.time_varying!r}")
+        if self.time_varying and self.model != "physical":
+            raise ContractError(f"time_varying: needs the physical model (its transitions carry durations); got model {self.model!r}")
+        if isinstance(self.horizon_h, bool) or not (isinstance(self.horizon_h, int | float) and math.isfinite(self.horizon_h)
+                                                    and self.horizon_h > 0):
+            raise ContractError(f"horizon_h: expected a number of hours > 0; got {self.horizon_h!r}")
         check_choice("model", self.model, MODEL_OPTIONS)
         check_choice("criterion", self.criterion, CRITERION_OPTIONS)
         if self.criterion not in CRITERIA[self.model]:

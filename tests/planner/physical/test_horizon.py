@@ -1,0 +1,195 @@
+"""The time-varying physical plan (planner.physical.horizon) on small grids.
+
+- A current that does not change gives every slice the stationary plan's values: they satisfy the
+  time-expanded equations, and the solver must find them.
+- A current that turns gives the values of a plain, literal backward recursion (Jacobi sweeps
+  from infinity over the models' per-(state, action) arrays) for both criteria.
+- Through ``make_plan``: a slice per forecast step within the horizon, the table carries them and
+  the executive's lookup by UTC time gets each slice's actions.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from planner.contract.errors import ContractError, ForecastError
+from planner.contract.settings import Goal, PhysicalSettings, PlanSettings
+from planner.contract.table import PolicyTable
+from planner.paper.solve import goal_cells_on
+from planner.physical.horizon import solve_horizon
+from planner.physical.model import PhysicalModel, assemble, enter_goal, sample_transitions
+from planner.physical.solve import solve_physical
+from tests.planner.physical.test_physical import goal_at, small_grid, swirl
+
+SETTINGS = PhysicalSettings(start_points=2, error_members=3, current_error_m_s=0.05)
+HOUR_S = 3600.0
+
+
+def models(criterion: str, factors: list[float], *, east_m_s: float = 0.0) -> tuple[list[PhysicalModel], Goal]:
+    """One model per slice: the swirl times ``factors[n]`` plus an eastward current."""
+    grid = small_grid()
+    refine = 2
+    base_u, base_v = swirl(grid, refine)
+    goal = goal_at(grid, 0, 3, 4)
+    settings = PlanSettings(model="physical", criterion=criterion, physical=SETTINGS)
+    out = []
+    for f in factors:
+        u, v = base_u * f + east_m_s, base_v * f
+        water = np.isfinite(u[:, ::refine, ::refine])
+        mask = goal_cells_on(grid, water, goal).mask
+        stats = enter_goal(sample_transitions(u, v, grid, settings, refine=refine), u, v, grid, settings,
+                           refine=refine, goal_mask=mask)
+        out.append(assemble(stats, grid, settings, refine=refine))
+    return out, goal
+
+
+@pytest.mark.parametrize("criterion", ["expected", "robust"])
+def test_a_steady_current_gives_every_slice_the_stationary_values(criterion):
+    slices, goal = models(criterion, [1.0, 1.0, 1.0])
+    stationary = solve_physical(slices[0], goal)
+    h = solve_horizon(lambda n: slices[n], np.array([0.0, 1.0, 2.0]) * HOUR_S, goal)
+    want = stationary.value_wh
+    assert np.isfinite(want).sum() > 100
+    for n in range(3):
+        got = h.value_wh[n]
+        assert np.array_equal(np.isfinite(got), np.isfinite(want)), n
+        fin = np.isfinite(want)
+        np.testing.assert_allclose(got[fin], want[fin], rtol=1e-7, atol=1e-9)
+    assert (h.action[0] == stationary.action)[np.isfinite(want)].mean() > 0.9  # ties may go either way
+
+
+def reference(slices: list[PhysicalModel], times_s: np.ndarray, goal: Goal, robust: bool) -> np.ndarray:
+    """Literal backward recursion: the last slice's stationary values, then Jacobi sweeps from infinity,
+    each over every (state, action) pair at once. An action's chance of staying in its own state
+    within the slice is solved for (expected), or the action is not taken (robust): from infinity
+    it would never get a value."""
+    T = len(slices)
+    last = solve_physical(slices[-1], goal)
+    K, (L, ny, nx) = 8, slices[0].water.shape
+    n_states = slices[0].n_states
+    value = np.full((T, n_states), math.inf)
+    value[-1] = np.moveaxis(last.value_wh, -1, 0).ravel()
+    goal_flat = np.broadcast_to(last.goal_cells.mask[None], (K, L, ny, nx)).ravel()
+    for n in range(T - 2, -1, -1):
+        md = slices[n]
+        pair_of = np.repeat(np.arange(md.pair_state.size), np.diff(md.ptr))
+        owner, o, prob = md.pair_state[pair_of], md.out_state, md.out_prob
+        land = np.array([max(k for k in range(T) if times_s[k] <= times_s[n] + d) for d in md.duration_s])
+        nxt = np.minimum(land + 1, T - 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = np.where(land == T - 1, 0.0, (times_s[n] + md.duration_s - times_s[land]) / (times_s[nxt] - times_s[land]))
+        m, w = land[pair_of], w[pair_of]
+        here = np.where(m == n, 1.0 - w, 0.0)  # the weight on this slice's own (unknown) values
+        fixed = np.where((m > n) & (w < 1), (1 - w) * value[m, o], 0.0) + np.where(w > 0, w * value[nxt[pair_of], o], 0.0)
+        stays = (here > 0) & (o == owner)
+        usable = np.ones(md.pair_state.size, dtype=bool)
+        if robust:
+            usable[pair_of[stays]] = False
+        stay = np.bincount(pair_of, weights=np.where(stays, prob * here, 0.0), minlength=usable.size)
+        V = np.full(n_states, math.inf)
+        V[goal_flat] = 0.0
+        for _sweep in range(1_000_000):
+            with np.errstate(invalid="ignore"):
+                x = np.where(here > 0, here * V[o], 0.0) + fixed
+            x[stays] = np.where(robust, x[stays], fixed[stays])
+            if robust:
+                q = np.full(usable.size, -math.inf)
+                np.maximum.at(q, pair_of, md.out_energy_max_wh + x)
+            else:
+                q = md.energy_wh + np.bincount(pair_of, weights=prob * x, minlength=usable.size)
+                q = q / (1.0 - stay)
+            q[~usable] = math.inf
+            new = np.full(n_states, math.inf)
+            np.minimum.at(new, md.pair_state, q)
+            new[goal_flat] = 0.0
+            both = np.isfinite(new) & np.isfinite(V)
+            done = np.array_equal(np.isfinite(new), np.isfinite(V)) and (not both.any() or
+                                                                          np.max(np.abs(new - V)[both]) < 1e-13)
+            V = new
+            if done:
+                break
+        else:
+            raise AssertionError("the reference did not converge")
+        value[n] = V
+    return value
+
+
+@pytest.mark.parametrize("criterion", ["expected", "robust"])
+def test_a_turning_current_gives_the_literal_recursions_values(criterion):
+    times = np.array([0.0, 0.5, 1.5, 3.0]) * HOUR_S  # uneven: landings fall in the same, next and later slices
+    slices, goal = models(criterion, [1.0, 0.3, -0.6, -1.0], east_m_s=0.1)
+    h = solve_horizon(lambda n: slices[n], times, goal)
+    want = reference(slices, times, goal, criterion == "robust")
+    for n in range(times.size):
+        got = np.moveaxis(h.value_wh[n], -1, 0).ravel()
+        assert np.array_equal(np.isfinite(got), np.isfinite(want[n])), n
+        fin = np.isfinite(want[n])
+        assert fin.sum() > 100
+        np.testing.assert_allclose(got[fin], want[n][fin], rtol=1e-7, atol=1e-9)
+    # The slices differ: time matters to this plan.
+    assert not np.allclose(np.nan_to_num(h.value_wh[0], posinf=0), np.nan_to_num(h.value_wh[2], posinf=0))
+
+
+@pytest.fixture(scope="module")
+def gyre_file(tmp_path_factory):
+    from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
+
+    path = tmp_path_factory.mktemp("gyre") / "gyre.nc"
+    write_gyre(path, DoubleGyreSettings(eps=0.25, hours=4.0, step_h=1.0, depths_m=(0.0, 5.0)))
+    return path
+
+
+def gyre_request(path, **settings):
+    from planner.contract.geodesy import BBox
+    from planner.pipeline import PlanRequest
+
+    base = PlanSettings(model="physical", criterion="expected", physical=SETTINGS, time_varying=True, **settings)
+    return PlanRequest(forecast_path=path, goal=Goal(lon_deg=-117.9, lat_deg=33.4, depth_m=0.0, radius_cells=1),
+                       depths_m=(0.0, 5.0), settings=base,
+                       bbox=BBox(west_deg=-118.15, south_deg=33.32, east_deg=-117.85, north_deg=33.45), nx=9, ny=5)
+
+
+def test_make_plan_makes_a_slice_per_forecast_step_within_the_horizon(gyre_file):
+    from planner.pipeline import make_plan
+
+    result = make_plan(gyre_request(gyre_file, horizon_h=3.0))
+    table = result.table
+    assert result.horizon is not None and table.n_slices == 4  # steps 0, 1, 2, 3 h
+    assert table.slice_times[0] == "2026-01-15T00:00:00Z" and table.slice_times[-1] == "2026-01-15T03:00:00Z"
+    back = PolicyTable.from_bytes(table.to_bytes())
+    assert back.slice_times == table.slice_times and np.array_equal(back.slices, result.horizon.action)
+    for n, when in enumerate(back.slice_unix_s):
+        chosen = back.slice_at(when)
+        assert chosen.index == n and np.array_equal(chosen.table.actions, result.horizon.action[n])
+    assert back.slice_at(back.slice_unix_s[-1] + 60.0).status == "past_horizon"
+    assert not np.array_equal(result.horizon.action[0], result.horizon.action[2])  # the gyre moves
+    assert np.array_equal(result.solution.action, result.horizon.action[0])
+
+
+def test_a_time_varying_plan_needs_two_steps_and_the_physical_model(gyre_file):
+    from planner.pipeline import make_plan
+
+    with pytest.raises(ForecastError, match="two or more forecast steps within planning.horizon_h = 0.5 h"):
+        make_plan(gyre_request(gyre_file, horizon_h=0.5))
+    with pytest.raises(ContractError, match="time_varying: needs the physical model"):
+        replace(PlanSettings(), time_varying=True)
+
+
+def test_lrauv_plan_time_varying_writes_the_slices(gyre_file, tmp_path):
+    out = tmp_path / "tv.lrpt"
+    cmd = [sys.executable, "-m", "planner.cli", "plan", "--forecast", str(gyre_file), "--model", "physical",
+           "--criterion", "expected", "--bbox", "-118.15,33.32,-117.85,33.45", "--nx", "9", "--ny", "5",
+           "--depths", "0,5", "--goal", "-117.9,33.4,0", "--time-varying", "--horizon-h", "2", "--out", str(out),
+           "--quiet"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "x 3 time slices" in done.stdout and "3 slices, 2026-01-15T00:00:00Z to 2026-01-15T02:00:00Z" in done.stdout
+    assert PolicyTable.load(out).n_slices == 3
+    bad = subprocess.run(cmd + ["--horizon-h", "0.2"], capture_output=True, text=True, timeout=600)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "two or more forecast steps" in bad.stderr
