@@ -17,6 +17,7 @@ from planner.contract.arguments import Subcommands
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import LrauvError
 from planner.shore.evaluation.runs import (
+    DEFAULT_METHODS,
     METHODS,
     OUTCOMES,
     MethodSummary,
@@ -33,7 +34,8 @@ def add_parser(sub: Subcommands) -> None:
                    help="truth forecast file(s) the runs fly through (several: each from its first time on)")
     p.add_argument("--starts", type=int, default=100, help="start states (default 100)")
     p.add_argument("--seed", type=int, default=0, help="seed of the start states (default 0)")
-    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated, of {','.join(METHODS)} (default all)")
+    p.add_argument("--methods", default=",".join(DEFAULT_METHODS),
+                   help=f"comma-separated, of {','.join(METHODS)} (default {','.join(DEFAULT_METHODS)})")
     p.add_argument("--dt-s", type=float, default=2.0, help="physics step in seconds (default 2)")
     p.add_argument("--max-hours", type=float, default=24.0, help="a run times out after this (default 24)")
     p.add_argument("--replan-h", type=float, help="plan again every H hours at the nearest forecast step (default: once)")
@@ -114,6 +116,10 @@ def format_table(summaries: list[MethodSummary]) -> str:
             f" {_num(s.median_energy_wh, 1):>9} {_num(s.median_predicted_wh, 1):>8} {_pct(s.energy_error, signed=True):>8}"
             f" {_pct(s.energy_vs_naive, signed=True):>8} {o['stranded']:>8} {o['left_region']:>5} {o['timed_out']:>7}"
             f" {o['gave_up']:>7} {o['refused']:>7}")
+    common = summaries[0].all_arrived if summaries else 0
+    if common and len(summaries) > 1:
+        means = ", ".join(f"{s.method} {s.mean_energy_all_arrived_wh:.1f}" for s in summaries)
+        lines.append(f"mean energy on the {common} starts every method arrived from, Wh: {means}")
     return "\n".join(lines)
 
 

@@ -24,6 +24,7 @@ from planner.contract.actions import Action
 from planner.cluster import InProcess, Runner, chunks
 from planner.contract.errors import ShoreError
 from planner.shore.evaluation.runs import (
+    DEFAULT_METHODS,
     METHODS,
     FeedbackPilot,
     NaivePilot,
@@ -51,7 +52,7 @@ class CampaignSpec:
     mission: Mission
     forecast_path: Path
     truth: Truth
-    methods: tuple[str, ...] = METHODS
+    methods: tuple[str, ...] = DEFAULT_METHODS
     n_starts: int = 100
     seed: int = 0
     dt_s: float = 2.0
@@ -93,9 +94,13 @@ class MethodPlan:
         return tuple(t for t, _ in self.schedule)
 
     def table_at(self, t_s: float) -> PolicyTable:
-        """The table in use at vehicle time ``t_s`` (looked up every physics step)."""
+        """The table in use at vehicle time ``t_s`` (looked up every physics step); of a time-varying
+        table, the slice of the UTC time ``t_s`` after its first slice, as the executive looks it up."""
         n = bisect_right(self._starts_s, t_s) - 1
-        return self.schedule[max(n, 0)][1]
+        table = self.schedule[max(n, 0)][1]
+        if table.time_varying:
+            return table.slice_at(table.slice_unix_s[0] + t_s).table
+        return table
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -115,7 +120,9 @@ def settings_for(method: str, base: PlanSettings) -> PlanSettings:
         return replace(base, model="paper", criterion="robust" if base.model != "paper" else base.criterion)
     if method == "physical-robust":
         return replace(base, model="physical", criterion="robust")
-    return replace(base, model="physical", criterion="expected")  # physical-expected, open-loop
+    if method == "time-varying":
+        return replace(base, model="physical", criterion="expected", time_varying=True)
+    return replace(base, model="physical", criterion="expected", time_varying=False)  # physical-expected, open-loop, replanned
 
 
 def request_for(spec: CampaignSpec, settings: PlanSettings, time_index: int) -> PlanRequest:
@@ -138,6 +145,8 @@ def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], 
     if spec.replan_s is not None:
         times = list(np.arange(0.0, spec.max_time_s, spec.replan_s))
     steps = [int(np.argmin(np.abs(forecast.time_s - (t0 + t)))) for t in times]
+    # replanned: every forecast step from the start to the runs' end
+    every = [n for n in range(spec.time_index, forecast.time_s.size) if forecast.time_s[n] - t0 < spec.max_time_s]
     cache: dict[tuple[str, int], PlanResult] = {}
     plans: dict[str, MethodPlan] = {}
     for method in spec.methods:
@@ -145,9 +154,16 @@ def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], 
             plans[method] = MethodPlan(method=method, schedule=(), first=None)
             continue
         settings = settings_for(method, spec.mission.settings)
-        key_model = "physical-expected" if method == "open-loop" else method
+        if method == "time-varying":  # slices to the runs' end, no further (nor past the mission's horizon)
+            settings = replace(settings, horizon_h=min(settings.horizon_h, spec.max_time_s / 3600.0))
+        key_model = "physical-expected" if method in ("open-loop", "replanned") else method
         schedule: list[tuple[float, PolicyTable]] = []
-        for t, index in zip(times, steps):
+        method_times, method_steps = times, steps
+        if method == "replanned":
+            method_times, method_steps = [float(forecast.time_s[n] - t0) for n in every], every
+        elif method == "time-varying":
+            method_times, method_steps = [0.0], [spec.time_index]
+        for t, index in zip(method_times, method_steps):
             key = (key_model, index)
             if key not in cache:
                 started = time.perf_counter()
@@ -155,7 +171,7 @@ def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], 
                 note(f"planned {key_model} at forecast step {index} in {time.perf_counter() - started:.1f} s")
             if not schedule or schedule[-1][1] is not cache[key].table:
                 schedule.append((t, cache[key].table))
-        first = cache[(key_model, steps[0])]
+        first = cache[(key_model, method_steps[0])]
         if method == "open-loop":
             schedule = [(0.0, first.table)]
         plans[method] = MethodPlan(method=method, schedule=tuple(schedule), first=first)

@@ -40,8 +40,11 @@ from planner.contract.vehicle import VehicleParams
 if TYPE_CHECKING:  # the parser imports this module: no scipy or numba at import time
     from planner.physical.solve import PhysicalStep
 
-Method = Literal["paper", "physical-robust", "physical-expected", "open-loop", "naive"]
+# time-varying: the physical plan with time in the state (docs/time-varying.md), planned once;
+# replanned: the stationary physical-expected plan made again at every forecast step.
+Method = Literal["paper", "physical-robust", "physical-expected", "open-loop", "naive", "time-varying", "replanned"]
 METHODS: tuple[str, ...] = get_args(Method)
+DEFAULT_METHODS: tuple[str, ...] = METHODS[:5]  # the time-varying comparison is asked for by name
 Outcome = Literal["arrived", "stranded", "left_region", "timed_out", "gave_up", "refused"]
 OUTCOMES: tuple[str, ...] = get_args(Outcome)
 
@@ -274,6 +277,8 @@ class MethodSummary:
     energy_error: float  # median over arrived runs of spent / predicted - 1
     energy_vs_naive: float  # mean energy over runs both arrived / naive's mean on them - 1
     both_with_naive: int
+    mean_energy_all_arrived_wh: float = math.nan  # mean energy over the starts every method arrived from
+    all_arrived: int = 0  # those starts
 
 
 def summarise(results: Sequence[RunResult], methods: Sequence[str]) -> list[MethodSummary]:
@@ -281,6 +286,7 @@ def summarise(results: Sequence[RunResult], methods: Sequence[str]) -> list[Meth
     by = {m: [r for r in results if r.method == m] for m in methods}
     arrived_any = {r.start for r in results if r.outcome == "arrived"}
     naive = {r.start: r for r in by.get("naive", []) if r.outcome == "arrived"}
+    every = set.intersection(*({r.start for r in by[m] if r.outcome == "arrived"} for m in methods)) if methods else set()
     out = []
     for m in methods:
         rs = by[m]
@@ -303,6 +309,8 @@ def summarise(results: Sequence[RunResult], methods: Sequence[str]) -> list[Meth
             energy_vs_naive=(float(np.mean([a for a, _ in both]) / np.mean([b for _, b in both]) - 1.0)
                              if both else math.nan),
             both_with_naive=len(both),
+            mean_energy_all_arrived_wh=float(np.mean([r.energy_wh for r in arrived if r.start in every])) if every else math.nan,
+            all_arrived=len(every),
         ))
     return out
 

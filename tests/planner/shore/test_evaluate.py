@@ -34,6 +34,7 @@ from planner.cli import main
 from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
 from planner.contract.errors import LrauvError
 from planner.shore.evaluation.runs import (
+    DEFAULT_METHODS,
     METHODS,
     OUTCOMES,
     FeedbackPilot,
@@ -53,7 +54,7 @@ from planner.pipeline import make_plan
 from vehicle_sim.dynamics import Setpoint, SetpointKind
 from planner.contract.geodesy import M_PER_DEG_LAT
 from planner.contract.vehicle import VehicleParams, power_draw_w
-from vehicle_sim.world import World
+from vehicle_sim.world import World, load_truth
 from tests.support import REPO
 
 GYRE_MISSION = REPO / "missions" / "eval-double-gyre.yaml"
@@ -123,7 +124,7 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
     # The table: one row per method, each with n runs.
     rows = {line.split()[0]: line.split() for line in printed.out.splitlines()
             if line.split() and line.split()[0] in METHODS}
-    assert sorted(rows) == sorted(METHODS)
+    assert sorted(rows) == sorted(DEFAULT_METHODS)
     assert all(int(r[1]) == n for r in rows.values()), printed.out
 
     # runs.csv: starts x methods rows, the documented columns, every outcome a known one.
@@ -131,8 +132,8 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
         reader = csv.DictReader(f)
         assert reader.fieldnames == RUN_COLUMNS
         runs = list(reader)
-    assert len(runs) == n * len(METHODS)
-    assert {(r["method"], int(r["start"])) for r in runs} == {(m, s) for m in METHODS for s in range(n)}
+    assert len(runs) == n * len(DEFAULT_METHODS)
+    assert {(r["method"], int(r["start"])) for r in runs} == {(m, s) for m in DEFAULT_METHODS for s in range(n)}
     assert {r["outcome"] for r in runs} <= set(OUTCOMES)
     assert all(float(r["time_s"]) >= 0 and float(r["energy_wh"]) >= 0 for r in runs)
     assert all(r["marked_reachable"] in ("0", "1") for r in runs)
@@ -147,7 +148,7 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
     # summary.json: per-method outcome counts add up to the runs and match runs.csv.
     summary = json.loads((out / "summary.json").read_text())
     assert summary["meta"]["starts"] == n and summary["meta"]["truth"] == [str(truth)]
-    assert [m["method"] for m in summary["methods"]] == list(METHODS)
+    assert [m["method"] for m in summary["methods"]] == list(DEFAULT_METHODS)
     for m in summary["methods"]:
         assert m["runs"] == n
         assert set(m["outcomes"]) == set(OUTCOMES)
@@ -599,3 +600,23 @@ def test_resolution_change_compares_the_campaigns_plans_with_plans_at_half_the_s
     assert r["median"] == pytest.approx(float(np.median(changes))) and r["max"] == pytest.approx(max(changes))
     assert r["median"] < 0.1  # the evaluation's resolution target (docs/evaluation.md), here over the starts
     assert out["physical-robust"]["starts"] > 0
+
+
+def test_the_time_varying_plan_is_flown_slice_by_slice_and_the_replanned_one_at_every_step(gyre, mission):
+    """time-varying: one plan whose slice follows the run's clock; replanned: the stationary plan of every step."""
+    truth = load_truth([gyre["truth"]])
+    spec = _spec(mission, gyre["truth"], truth, methods=("time-varying", "replanned", "naive"), n_starts=3,
+                 max_time_s=4 * 3600.0)
+    campaign = run_all(prepare(spec))
+    tv, rp = campaign.plans["time-varying"], campaign.plans["replanned"]
+    timed = tv.schedule[0][1]
+    assert len(tv.schedule) == 1 and timed.time_varying and timed.n_slices == 5  # 0..4 h, hourly
+    for n in range(timed.n_slices):
+        assert np.array_equal(tv.table_at(n * 3600.0).actions, timed.slices[n])
+    assert tv.table_at(1799.0) is timed.slice_table(0) and tv.table_at(1801.0) is timed.slice_table(1)
+    assert [t for t, _ in rp.schedule] == [0.0, 3600.0, 7200.0, 10800.0]  # every step before the runs' end
+    assert all(not table.time_varying for _, table in rp.schedule)
+    by = {(r.method, r.start): r for r in campaign.results}
+    assert all(math.isfinite(by["time-varying", s].predicted_wh) for s in range(3) if by["time-varying", s].marked_reachable)
+    summary = {s.method: s for s in summarise(campaign.results, spec.methods)}
+    assert summary["naive"].all_arrived == summary["time-varying"].all_arrived
