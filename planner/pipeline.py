@@ -25,6 +25,7 @@ from planner.forecast import (
     nearest_time_index,
     open_forecast,
 )
+from planner.forecast.error import ErrorEstimate, measure_error
 from planner.forecast.resample import resample
 from planner.grid import Grid
 from planner.contract.geodesy import BBox
@@ -67,6 +68,7 @@ class PlanRequest:
     grid_file: Path | None = None
     ensemble: tuple[Path, ...] = ()  # further forecast files: members of an ensemble (physical model)
     members: tuple[MemberRef, ...] | None = None  # explicit members, instead of every member of the files
+    previous_forecast: Path | None = None  # an earlier issue: measures the forecast error (planner.forecast.error)
 
     @classmethod
     def for_mission(cls, mission: Mission, forecast_path: Path, *, goal_index: int = 0) -> PlanRequest:
@@ -92,6 +94,7 @@ class PlanResult:
     table: PolicyTable
     timings_s: dict[str, float]
     horizon: HorizonSolution | None = None  # a time-varying plan's slices; ``solution`` is its first
+    error: ErrorEstimate | None = None  # the measured forecast error the physical model sampled with
 
 
 class SampleCache:
@@ -276,10 +279,12 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
     if len(refs) > 1:
         return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)
+    steps_needed = request.settings.time_varying or (request.settings.error_measured and request.settings.model == "physical")
+    if forecast is None and steps_needed:  # every step: the slices, or the change to measure
+        forecast = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
+                                 member=refs[0].member, bbox=request.bbox)
     if request.settings.time_varying:
-        if forecast is None:  # every step: the slices are the forecast's own steps
-            forecast = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
-                                     member=refs[0].member, bbox=request.bbox)
+        assert forecast is not None
         return _plan_horizon(request, forecast, choose_time_index(forecast, request), timings, t, progress)
     if forecast is None:
         forecast, index = open_step(request, refs[0])
@@ -292,7 +297,9 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states")
     model: TransitionModel | PhysicalModel
     solution: Solution | PhysicalSolution
+    error = None
     if request.settings.model == "physical":
+        request, error = _with_error(request, forecast, grid, index, progress)
         t = time.perf_counter()
         refine = refine_factor(grid, native_spacing_deg(forecast))
         uf, vf = resample(forecast, fine_grid(grid, refine), time_index=step)
@@ -333,8 +340,25 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     )
     return PlanResult(
         forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=model,
-        solution=solution, table=table, timings_s=timings,
+        solution=solution, table=table, timings_s=timings, error=error,
     )
+
+
+def _with_error(request: PlanRequest, forecast: Forecast, grid: Grid, index: int,
+                progress: bool) -> tuple[PlanRequest, ErrorEstimate | None]:
+    """The request with ``current_error_m_s`` measured from the data, when its settings ask for that."""
+    settings = request.settings
+    if not settings.error_measured:
+        return request, None
+    previous = None
+    if request.previous_forecast is not None:
+        previous = open_forecast(request.previous_forecast, variables=request.variables, grid_file=request.grid_file,
+                                 bbox=request.bbox)
+    error = measure_error(forecast, grid, index, settings.horizon_h, time_varying=settings.time_varying,
+                          previous=previous, default_m_s=settings.physical.current_error_m_s)
+    _note(progress, f"forecast error {error.describe()}")
+    physical = replace(settings.physical, current_error_m_s=round(error.current_error_m_s, 4))
+    return replace(request, settings=replace(settings, physical=physical)), error
 
 
 def slice_steps(forecast: Forecast, index: int, horizon_h: float) -> list[int]:
@@ -354,11 +378,12 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     if forecast.time_origin is None:
         raise ForecastError(f"{forecast.source}: a time-varying plan needs dated forecast steps (its table is looked up "
                             "by UTC time); the file's time axis has no reference date")
-    settings = request.settings
-    steps = slice_steps(forecast, index, settings.horizon_h)
+    steps = slice_steps(forecast, index, request.settings.horizon_h)
     timings["load_s"] = time.perf_counter() - t
     grid = planning_grid(forecast, request)
     check_coverage(forecast, grid)
+    request, error = _with_error(request, forecast, grid, index, progress)
+    settings = request.settings
     refine = refine_factor(grid, native_spacing_deg(forecast))
     fine = fine_grid(grid, refine)
     t = time.perf_counter()
@@ -389,7 +414,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
         forecast_time=slice_times[0],
     ).with_slices(slice_times, horizon.action)
     return PlanResult(forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=solution.model,
-                      solution=solution, table=table, timings_s=timings, horizon=horizon)
+                      solution=solution, table=table, timings_s=timings, horizon=horizon, error=error)
 
 
 def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, workers: int | None = None,

@@ -28,6 +28,11 @@ def summary_lines(result: PlanResult, *, out: Path, size: int) -> list[str]:
     ]
     lines.extend(model_lines(result))
     lines.append(f"reachable  {reachable:,} of {water_states:,} water states ({reachable / max(water_states, 1):.1%})")
+    if result.model.settings.model == "physical" and reachable < 0.5 * water_states:
+        error = result.model.settings.physical.current_error_m_s
+        lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g} m/s"
+                     " per component: where the current changes within hours, plan with time in the state"
+                     " (planning.time_varying) rather than a larger error")
     return lines
 
 
@@ -52,6 +57,8 @@ def model_lines(result: PlanResult) -> list[str]:
          f" currents{f' x {m.members} forecast members' if m.members > 1 else ''}),"
          f" currents {m.refine}x finer than the grid"),
     ]
+    if result.error is not None:
+        lines.append(f"error      {result.error.describe()}")
     h = result.horizon
     if h is not None:
         times = result.table.slice_times

@@ -61,6 +61,10 @@ def add_parser(sub: Subcommands) -> None:
     plan.add_argument("--time-varying", action="store_true", default=None,
                       help="physical model: a plan with time in the state, a slice per forecast step (docs/time-varying.md)")
     plan.add_argument("--horizon-h", type=float, help="time-varying plan: hours of forecast it spans (default 72)")
+    plan.add_argument("--current-error", metavar="M_S|measured",
+                      help="physical model: forecast error per current component, m/s, or 'measured' from the data")
+    plan.add_argument("--previous-forecast", type=Path, metavar="FILE",
+                      help="an earlier issue of the forecast: with --current-error measured, the error is the issues' difference")
     plan.add_argument("--out", type=Path, help="policy table to write (default: <mission name>.lrpt)")
     plan.add_argument("--no-compress", action="store_true", help="store the table payload uncompressed")
     plan.add_argument("--export-values", type=Path, help="also write the arrays of spec section 8 to this .npz")
@@ -168,8 +172,22 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     if criterion not in CRITERIA[model]:
         source = "" if args.criterion else f" (from {mission.path if mission is not None else 'the default'}; give --criterion)"
         raise LrauvError(f"--criterion: the {model} model has {' and '.join(CRITERIA[model])}; got {criterion!r}{source}")
+    measured = base.error_measured
+    physical = base.physical
+    if args.current_error is not None:
+        measured = args.current_error == "measured"
+        if not measured:
+            try:
+                value = float(args.current_error)
+            except ValueError:
+                raise LrauvError(f"--current-error: expected a speed in m/s >= 0 or 'measured'; got {args.current_error!r}") from None
+            if not (math.isfinite(value) and value >= 0):
+                raise LrauvError(f"--current-error: expected a speed in m/s >= 0 or 'measured'; got {args.current_error!r}")
+            physical = replace(physical, current_error_m_s=value)
     settings = replace(
         base,
+        physical=physical,
+        error_measured=measured,
         model=model,
         criterion=criterion,
         uncertainty=args.uncertainty or base.uncertainty,
@@ -181,7 +199,7 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     return PlanRequest(
         forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,
         bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,
-        grid_file=grid_file, ensemble=ensemble,
+        grid_file=grid_file, ensemble=ensemble, previous_forecast=args.previous_forecast,
     )
 
 

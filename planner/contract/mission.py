@@ -415,6 +415,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         vehicle=vehicle.params(),
         time_varying=time_varying,
         horizon_h=pl.number("horizon_h", 72.0, minimum=1, unit="h"),
+        error_measured=_measured(pl),
     )
 
     goals_raw = top.raw("goals")
@@ -477,6 +478,12 @@ PHYSICAL_INTEGERS = ("start_points", "error_members", "rk4_steps", "max_iteratio
 PHYSICAL_NUMBERS = {"current_error_m_s": "m/s", "max_transition_s": "s", "min_cost_wh": "Wh", "tolerance_wh": "Wh"}
 
 
+def _measured(pl: YamlSection) -> bool:
+    """``planning.physical.current_error_m_s: measured``: the size from the data (docs/time-varying.md)."""
+    ph = pl.raw("physical")
+    return isinstance(ph, dict) and ph.get("current_error_m_s") == "measured"
+
+
 def _physical(doc: YamlDocument, pl: YamlSection) -> PhysicalSettings:
     """``planning.physical``: the physical model's sampling (docs/physical-model.md); the paper model ignores it.
 
@@ -486,8 +493,8 @@ def _physical(doc: YamlDocument, pl: YamlSection) -> PhysicalSettings:
     ph = pl.section("physical", set(PHYSICAL_INTEGERS) | set(PHYSICAL_NUMBERS) | {"course_offsets"})
     d = PhysicalSettings()
     values: dict[str, Any] = {name: ph.integer(name) if ph.has(name) else getattr(d, name) for name in PHYSICAL_INTEGERS}
-    values.update({name: ph.number(name, unit=unit) if ph.has(name) else getattr(d, name)
-                   for name, unit in PHYSICAL_NUMBERS.items()})
+    values.update({name: ph.number(name, unit=unit) if ph.has(name) and not (name == "current_error_m_s" and _measured(pl))
+                   else getattr(d, name) for name, unit in PHYSICAL_NUMBERS.items()})
     values["course_offsets"] = ph.boolean("course_offsets", d.course_offsets) if ph.has("course_offsets") else d.course_offsets
     try:
         return PhysicalSettings(**values)

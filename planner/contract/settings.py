@@ -158,6 +158,8 @@ class PlanSettings:
     # ``horizon_h`` hours; False plans on one forecast step and assumes its current lasts.
     time_varying: bool = False
     horizon_h: float = 72.0
+    # ``physical.current_error_m_s`` measured from the data (planner.forecast.error) rather than given.
+    error_measured: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.time_varying, bool):

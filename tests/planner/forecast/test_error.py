@@ -1,0 +1,88 @@
+"""The forecast error measured from data (planner.forecast.error), on real netCDF files the tests write."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from planner.contract.geodesy import BBox
+from planner.forecast import open_forecast
+from planner.forecast.error import measure_error
+from planner.forecast.resample import resample
+from planner.forecast.synthetic.tidal import TidalSettings, with_forecast_error, write_tidal
+from planner.grid import Grid
+
+BOX = BBox(west_deg=-118.2, south_deg=33.35, east_deg=-117.8, north_deg=33.45)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tide")
+    truth = TidalSettings(hours=6, depths_m=(0.0,))
+    return (write_tidal(root / "truth.nc", truth),
+            write_tidal(root / "forecast.nc", with_forecast_error(truth, phase_error_h=1.0, amplitude_error=-0.2)))
+
+
+def grid() -> Grid:
+    return Grid.from_bbox(BOX, nx=25, ny=11, depths_m=[0.0])
+
+
+def test_a_stationary_plan_measures_the_forecasts_own_change(files):
+    truth_path, _ = files
+    f = open_forecast(truth_path)
+    g = grid()
+    est = measure_error(f, g, 0, 3.0, time_varying=False, default_m_s=0.03)
+    assert est.source == "forecast change" and "over the next 3 h (3 steps" in est.detail
+    u0, v0 = resample(f, g, time_index=0)
+    diffs = []
+    for n in (1, 2, 3):
+        u, v = resample(f, g, time_index=n)
+        diffs += [(u - u0)[np.isfinite(u)], (v - v0)[np.isfinite(v)]]
+    want = math.sqrt(np.mean(np.concatenate(diffs) ** 2))
+    assert est.current_error_m_s == pytest.approx(want, rel=1e-12)
+    assert est.current_error_m_s > 0.1  # the tide turns: far more than the 0.03 default
+
+
+def test_a_time_varying_plan_measures_from_a_previous_issue_or_keeps_the_default(files):
+    truth_path, forecast_path = files
+    f, prev = open_forecast(forecast_path), open_forecast(truth_path)
+    est = measure_error(f, grid(), 0, 6.0, time_varying=True, default_m_s=0.03)
+    assert est.source == "default" and est.current_error_m_s == 0.03 and "carries the forecast's change" in est.detail
+    est = measure_error(f, grid(), 0, 6.0, time_varying=True, previous=prev, default_m_s=0.03)
+    assert est.source == "previous issue" and "at the 7 valid time(s)" in est.detail
+    assert 0.05 < est.current_error_m_s < 1.0
+    same = measure_error(prev, grid(), 0, 6.0, time_varying=True, previous=prev, default_m_s=0.03)
+    assert same.current_error_m_s == 0.0
+
+
+def test_a_mission_asks_for_a_measured_error(tmp_path):
+    from planner.contract.mission import load_mission
+
+    text = open("missions/eval-tidal.yaml").read().replace(
+        "  criterion: expected\n", "  criterion: expected\n  physical: {current_error_m_s: measured}\n", 1)
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    m = load_mission(path)
+    assert m.settings.error_measured and m.settings.physical.current_error_m_s == 0.03
+    path.write_text(text.replace("measured", "lots"))
+    with pytest.raises(Exception, match="current_error_m_s"):
+        load_mission(path)
+
+
+def test_plan_says_what_it_chose_and_warns_when_most_states_are_unreachable(files, tmp_path):
+    from planner.contract.mission import load_mission
+    from planner.pipeline import PlanRequest, make_plan
+    from planner.plan_summary import summary_lines
+
+    truth_path, _ = files
+    mission = load_mission("missions/eval-tidal.yaml")
+    request = PlanRequest.for_mission(mission, truth_path)
+    settings = replace(request.settings, error_measured=True, horizon_h=6.0)
+    result = make_plan(replace(request, settings=settings))
+    lines = summary_lines(result, out=tmp_path / "t.lrpt", size=0)
+    assert any(line.startswith("error      ") and "forecast change" in line for line in lines)
+    assert result.model.settings.physical.current_error_m_s == round(result.error.current_error_m_s, 4)
+    assert any(line.startswith("warning    fewer than half the water states") for line in lines), lines
