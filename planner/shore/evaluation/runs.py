@@ -119,8 +119,13 @@ class FeedbackPilot:
 
     def command(self, body: Body) -> Setpoint | str:
         table = self._table_at(body.time_s)
-        if table is not self._table:  # a new plan: decide afresh, as the helm does on a swap (no held cell or manoeuvre)
-            self._table, self._state, self._cell, self._held = table, None, None, None
+        if table is not self._table:
+            # The next slice of a time-varying plan (the same file): decide again now, as the helm does on
+            # every update, keeping the held cell and manoeuvre. A new plan: decide afresh, as the helm
+            # does on a swap (no held cell or manoeuvre).
+            if self._table is None or table.crc32 != self._table.crc32:
+                self._cell, self._held = None, None
+            self._table, self._state = table, None
         if self._held is not None:
             sp, done = self._held
             if not done(body):
