@@ -46,10 +46,10 @@ def grid_of(size: str) -> tuple[int, int, int]:
 
 
 def run_plan(repo: Path, forecast: Path, nx: int, ny: int, radius: int, out: Path, *,
-             model: str) -> tuple[float, float, int, str, float]:
+             model: str, extra: tuple[str, ...] = ()) -> tuple[float, float, int, str, float]:
     """One ``lrauv plan`` process: (reported plan s, wall s, peak RSS bytes, its output, reported solve s)."""
     cmd = [sys.executable, "-m", "planner.cli", "plan", "missions/demo-physical.yaml", "--forecast", str(forecast),
-           "--nx", str(nx), "--ny", str(ny), "--goal-radius", str(radius), "--out", str(out), "--model", model]
+           "--nx", str(nx), "--ny", str(ny), "--goal-radius", str(radius), "--out", str(out), "--model", model, *extra]
     if model == "paper":
         cmd += ["--criterion", "robust"]
     env = dict(os.environ, PYTHONPATH=str(repo))

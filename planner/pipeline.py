@@ -361,10 +361,20 @@ def _with_error(request: PlanRequest, forecast: Forecast, grid: Grid, index: int
     return replace(request, settings=replace(settings, physical=physical)), error
 
 
-def slice_steps(forecast: Forecast, index: int, horizon_h: float) -> list[int]:
-    """The forecast steps of a time-varying plan: from ``index`` to ``horizon_h`` hours after it."""
+def slice_steps(forecast: Forecast, index: int, horizon_h: float, slice_h: float | None = None) -> list[int]:
+    """The forecast steps of a time-varying plan: from ``index`` to ``horizon_h`` hours after it, every
+    ``slice_h`` hours (a multiple of the forecast's step) or every step."""
     t0 = float(forecast.time_s[index])
     steps = [n for n in range(index, forecast.time_s.size) if forecast.time_s[n] - t0 <= horizon_h * 3600.0 + 1e-6]
+    if slice_h is not None:
+        on = [n for n in steps if abs((forecast.time_s[n] - t0) / 3600.0 / slice_h
+                                      - round((forecast.time_s[n] - t0) / 3600.0 / slice_h)) * slice_h * 3600.0 < 1.0]
+        gaps = np.diff(forecast.time_s[on]) / 3600.0
+        if len(on) < 2 or np.any(np.abs(gaps - slice_h) > 1.0 / 3600.0):
+            raise ForecastError(f"{forecast.source}: planning.slice_h = {slice_h:g} h is not a whole number of the "
+                                f"forecast's steps from step {index} (its steps are "
+                                f"{', '.join(f'{(t - t0) / 3600:g}' for t in forecast.time_s[steps[:6]])} ... h)")
+        steps = on
     if len(steps) < 2:
         raise ForecastError(f"{forecast.source}: a time-varying plan needs two or more forecast steps within "
                             f"planning.horizon_h = {horizon_h:g} h of step {index}; the file has {forecast.time_s.size} "
@@ -378,7 +388,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     if forecast.time_origin is None:
         raise ForecastError(f"{forecast.source}: a time-varying plan needs dated forecast steps (its table is looked up "
                             "by UTC time); the file's time axis has no reference date")
-    steps = slice_steps(forecast, index, request.settings.horizon_h)
+    steps = slice_steps(forecast, index, request.settings.horizon_h, request.settings.slice_h)
     timings["load_s"] = time.perf_counter() - t
     grid = planning_grid(forecast, request)
     check_coverage(forecast, grid)

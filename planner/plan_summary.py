@@ -62,7 +62,8 @@ def model_lines(result: PlanResult) -> list[str]:
     h = result.horizon
     if h is not None:
         times = result.table.slice_times
-        lines.append(f"time       {h.n_slices} slices, {times[0]} to {times[-1]} (the forecast's own steps); past the"
+        spacing = "the forecast's own steps" if s.slice_h is None else f"every {s.slice_h:g} h"
+        lines.append(f"slices     {h.n_slices} slices, {times[0]} to {times[-1]} ({spacing}); past the"
                      f" last, its stationary plan; {sum(h.sweeps):,} Gauss-Seidel sweeps over the earlier slices")
     elif s.criterion == "expected":
         lines.append(f"solve      value iteration: {sol.sweeps} sweeps, then policy iteration: {sol.iterations} "

@@ -61,6 +61,8 @@ def add_parser(sub: Subcommands) -> None:
     plan.add_argument("--time-varying", action="store_true", default=None,
                       help="physical model: a plan with time in the state, a slice per forecast step (docs/time-varying.md)")
     plan.add_argument("--horizon-h", type=float, help="time-varying plan: hours of forecast it spans (default 72)")
+    plan.add_argument("--slice-h", type=float, help="time-varying plan: hours between slices, a multiple of the "
+                                                     "forecast's step (default: every step)")
     plan.add_argument("--current-error", metavar="M_S|measured",
                       help="physical model: forecast error per current component, m/s, or 'measured' from the data")
     plan.add_argument("--previous-forecast", type=Path, metavar="FILE",
@@ -195,6 +197,7 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
         calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
         time_varying=bool(args.time_varying) or base.time_varying,
         horizon_h=base.horizon_h if args.horizon_h is None else args.horizon_h,
+        slice_h=base.slice_h if args.slice_h is None else args.slice_h,
     )
     return PlanRequest(
         forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,

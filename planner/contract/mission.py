@@ -386,7 +386,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     )
 
     pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical",
-                                  "time_varying", "horizon_h"})
+                                  "time_varying", "horizon_h", "slice_h"})
     model = pl.choice("model", MODEL_OPTIONS, "paper")
     criterion_text = pl.text("criterion", "robust")
     if criterion_text not in CRITERIA[model]:
@@ -415,6 +415,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         vehicle=vehicle.params(),
         time_varying=time_varying,
         horizon_h=pl.number("horizon_h", 72.0, minimum=1, unit="h"),
+        slice_h=pl.number("slice_h", minimum=0.01, unit="h") if pl.has("slice_h") else None,
         error_measured=_measured(pl),
     )
 

@@ -158,6 +158,7 @@ class PlanSettings:
     # ``horizon_h`` hours; False plans on one forecast step and assumes its current lasts.
     time_varying: bool = False
     horizon_h: float = 72.0
+    slice_h: float | None = None  # hours between slices, a multiple of the forecast's step; None: every step
     # ``physical.current_error_m_s`` measured from the data (planner.forecast.error) rather than given.
     error_measured: bool = False
 
@@ -169,6 +170,9 @@ class PlanSettings:
         if isinstance(self.horizon_h, bool) or not (isinstance(self.horizon_h, int | float) and math.isfinite(self.horizon_h)
                                                     and self.horizon_h > 0):
             raise ContractError(f"horizon_h: expected a number of hours > 0; got {self.horizon_h!r}")
+        if self.slice_h is not None and (isinstance(self.slice_h, bool) or not isinstance(self.slice_h, int | float)
+                                         or not math.isfinite(self.slice_h) or self.slice_h <= 0):
+            raise ContractError(f"slice_h: expected a number of hours > 0; got {self.slice_h!r}")
         check_choice("model", self.model, MODEL_OPTIONS)
         check_choice("criterion", self.criterion, CRITERION_OPTIONS)
         if self.criterion not in CRITERIA[self.model]:

@@ -189,7 +189,19 @@ def test_lrauv_plan_time_varying_writes_the_slices(gyre_file, tmp_path):
            "--quiet"]
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
-    assert "x 3 time slices" in done.stdout and "3 slices, 2026-01-15T00:00:00Z to 2026-01-15T02:00:00Z" in done.stdout
+    assert "x 3 time slices" in done.stdout and "slices     3 slices, 2026-01-15T00:00:00Z to 2026-01-15T02:00:00Z" in done.stdout
     assert PolicyTable.load(out).n_slices == 3
     bad = subprocess.run(cmd + ["--horizon-h", "0.2"], capture_output=True, text=True, timeout=600)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr and "two or more forecast steps" in bad.stderr
+
+
+def test_slices_every_few_steps_or_a_clear_refusal(gyre_file):
+    from planner.forecast import open_forecast
+    from planner.pipeline import slice_steps
+
+    f = open_forecast(gyre_file)  # hourly, 0..4 h
+    assert slice_steps(f, 0, 4.0) == [0, 1, 2, 3, 4]
+    assert slice_steps(f, 0, 4.0, 2.0) == [0, 2, 4]
+    assert slice_steps(f, 1, 4.0, 3.0) == [1, 4]
+    with pytest.raises(ForecastError, match="slice_h = 1.5 h is not a whole number of the forecast's steps"):
+        slice_steps(f, 0, 4.0, 1.5)
