@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import durable, goal_tables
+from executive import durable, goal_tables, timeline
 from executive import signing
 from executive.clock import VehicleClock
 from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, step, swapped
@@ -135,6 +135,7 @@ class Executive:
         self.staged: MissionPlan | None = None  # uploaded goals still waiting for their first table
         self.swaps: list[dict[str, Any]] = []  # every swap's log record, for the summary and tests
         self._unix_offset_s: float | None = None  # SYSTEM_TIME: unix time = vehicle time + offset
+        self.timeline = timeline.Timeline()  # the slice of a time-varying plan the last decision used
         self._work_dir = config.work_dir or config.log_path.with_name(config.log_path.stem + "-work")
         self.uploads = Uploads(accept_goals=self._accept_goals, accept_file=self._accept_file,
                                refused=lambda what, why: self._refuse(self.clock.now_s(time.monotonic()), what, why,
@@ -322,6 +323,7 @@ class Executive:
             self.vehicle = VehicleState()
             self.helm = HelmState()
             self._last_time.clear()
+            self._unix_offset_s = None  # relative to the old boot: UTC is unknown until the next SYSTEM_TIME
         now_s = self.clock.now_s(wall)
         if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
             return False
@@ -358,15 +360,25 @@ class Executive:
     def _tick(self, now_s: float, *, link_ok: bool) -> None:
         if self._pending is not None:
             self._swap(now_s)  # the decision boundary: a new plan is used whole, from this decision on
-        tick = step(self.helm, self.vehicle, self.table, self.helm_config, now_s=now_s, link_ok=link_ok)
+        # A time-varying plan: the slice that holds at the vehicle's UTC time (a stationary one is its own slice).
+        table = self.table
+        followed = None if table is None else timeline.follow(self.timeline, table,
+                                                              timeline.utc_s(now_s, self._unix_offset_s))
+        current = None if followed is None else followed.current
+        tick = step(self.helm, self.vehicle, None if current is None else current.table, self.helm_config,
+                    now_s=now_s, link_ok=link_ok)
         self.helm = tick.helm
+        if followed is not None and tick.decision is not None:  # the log announces the slice decisions use
+            self.timeline = followed.timeline
+            for event in followed.events:
+                self._event(now_s, event)
         for event in tick.events:
             self._event(now_s, event)
         for cmd in tick.commands:
             self._send_command(now_s, cmd)
         if tick.decision is not None:
             self._counts["decisions"] += 1
-            self._log(self.recorder.write, Topic.DECISION, now_s, tick.decision.to_record())
+            self._log(self.recorder.write, Topic.DECISION, now_s, timeline.decision_record(tick.decision, current))
         if self.helm.phase is Phase.ARRIVED:
             self._arrived(now_s)
 
@@ -418,6 +430,8 @@ class Executive:
                   "previous": goal_tables.identity(old_table), **goal_tables.identity(new.table)}
         if new.table is not None:
             record["forecast"] = {"identity": new.table.forecast_identity, "time": new.table.forecast_time}
+            if new.table.time_varying:
+                record["slices"] = timeline.slices_record(new.table)
         self.swaps.append(record)
         self._log(self.recorder.write, Topic.POLICY, now_s, record)
         self._log(self._save_state, now_s)  # after this decision's commands are out
@@ -594,6 +608,8 @@ class Executive:
         }
         if goal_index is not None:
             record["goal_index"] = goal_index
+        if table.time_varying:
+            record["slices"] = timeline.slices_record(table)
         self.recorder.write(Topic.POLICY, now_s, record)
         if table_bytes is not None:
             self._blobs[table.crc32] = table_bytes

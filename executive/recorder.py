@@ -164,6 +164,10 @@ _DECISION = _lrauv("lrauv.Decision", "One helm decision: where the vehicle was a
     "action": _STR_OR_NULL,
     "mode": _STR,
     "changed": _BOOL,
+}, {
+    # time-varying plans only (executive.timeline): the slice decided with, and why that slice
+    "slice": _INT,
+    "slice_status": {"type": "string", "enum": ["in_horizon", "before_start", "past_horizon", "time_unknown"]},
 })
 
 _COMMAND = _lrauv("lrauv.Command", "A command the helm sent; the remaining keys are the command's fields", {
@@ -189,6 +193,8 @@ _POLICY = _lrauv("lrauv.Policy", "A policy table the executive loaded, swapped i
     "goal": _OBJ,
     "model": _STR_OR_NULL,
     "criterion": _STR_OR_NULL,
+    # time-varying tables only: how many slices, the first's and the last's UTC time
+    "slices": {"type": "object", "properties": {"count": _INT, "first_utc": _STR, "last_utc": _STR}},
 })
 
 _MAVLINK = _lrauv("lrauv.MavlinkMessage", "One MAVLink message as received or sent", {

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import zlib
@@ -153,3 +154,132 @@ def test_heading_index_equals_the_vectorised_nearest_bearing(demo_plan, rng):
         for h in headings:
             expected = int(np.argmin(np.abs(np.mod(h - row + 180.0, 360.0) - 180.0)))
             assert table.heading_index(j, h) == expected, (j, h)
+
+
+# -- version 2: time-varying tables ----------------------------------------------------------------
+
+HOURS = ("2026-01-15T00:00:00Z", "2026-01-15T01:00:00Z", "2026-01-15T02:00:00Z")
+T0 = 1768435200.0  # HOURS[0], Unix s
+
+
+def _slices(table: PolicyTable, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` slices: the table's actions, then each with some water states changed (land stays UNREACHABLE)."""
+    stack = np.repeat(table.actions[None], n, axis=0).copy()
+    for s in range(1, n):
+        change = table.water[..., None] & (rng.random(table.actions.shape) < 0.05)
+        stack[s][change] = rng.integers(0, 6, size=int(change.sum()))
+    return stack
+
+
+def _rewritten(data: bytes, *, version: int | None = None, header=lambda h: h, payload=lambda p: p) -> bytes:  # type: ignore[no-untyped-def]
+    """A table file with its version, header or raw payload changed, its lengths and CRC made right again."""
+    import json
+    import struct
+
+    magic, ver, flags, header_len = struct.unpack_from("<8sHHI", data, 0)
+    head = json.dumps(header(json.loads(data[16:16 + header_len])), sort_keys=True, separators=(",", ":")).encode()
+    stored_len, _raw_len = struct.unpack_from("<II", data, 16 + header_len)
+    stored = data[24 + header_len:24 + header_len + stored_len]
+    raw = payload(zlib.decompress(stored) if flags & 1 else stored)
+    stored = zlib.compress(raw, 9) if flags & 1 else raw
+    body = (struct.pack("<8sHHI", magic, ver if version is None else version, flags, len(head)) + head
+            + struct.pack("<II", len(stored), len(raw)) + stored)
+    return body + zlib.crc32(body).to_bytes(4, "little")
+
+
+@pytest.fixture(scope="module")
+def timed(demo_plan) -> PolicyTable:
+    return demo_plan.table.with_slices(HOURS, _slices(demo_plan.table, 3, np.random.default_rng(7)))
+
+
+@pytest.mark.parametrize("compress", [True, False])
+def test_a_time_varying_table_round_trips_as_version_2(timed, compress):
+    data = timed.to_bytes(compress=compress)
+    assert int.from_bytes(data[8:10], "little") == 2
+    back = PolicyTable.from_bytes(data)
+    assert back.time_varying and back.n_slices == 3 and back.slice_times == HOURS
+    assert back.slices is not None and np.array_equal(back.slices, timed.slices)
+    assert np.array_equal(back.actions, timed.slices[0]) and np.array_equal(back.water, timed.water)
+    assert back.header()["time"] == {"slices_utc": list(HOURS), "lookup": "nearest"}
+    assert back.to_bytes(compress=compress) == data
+    assert back.slice_unix_s == (T0, T0 + 3600.0, T0 + 7200.0)
+    for n in range(3):  # each slice is a stationary table with the file's identity
+        view = back.slice_table(n)
+        assert not view.time_varying and np.array_equal(view.actions, timed.slices[n])
+        assert view.crc32 == back.crc32 == timed.crc32
+
+
+def test_a_stationary_table_is_still_version_1_byte_for_byte(demo_plan):
+    """The file, built here from docs/policy-table.md's version 1 layout, is what the writer gives."""
+    import json
+    import struct
+
+    table = demo_plan.table
+    head = json.dumps(table.header(), sort_keys=True, separators=(",", ":")).encode()
+    assert "time" not in table.header()
+    mask = np.packbits(table.water.ravel(), bitorder="little").tobytes()
+    flat = table.actions.ravel()
+    raw = mask + ((flat[0::2] & 0x0F) | (flat[1::2] << 4)).astype(np.uint8).tobytes()  # an even number of states
+    stored = zlib.compress(raw, 9)
+    body = struct.pack("<8sHHI", b"LRAUVPT\0", 1, 1, len(head)) + head + struct.pack("<II", len(stored), len(raw)) + stored
+    data = table.to_bytes()
+    assert data == body + zlib.crc32(body).to_bytes(4, "little")
+    assert PolicyTable.from_bytes(data).to_bytes() == data
+    assert not table.time_varying and table.n_slices == 1 and table.slice_unix_s == ()
+    assert table.slice_at(T0).table is table and table.slice_at(T0).status == "stationary"
+
+
+@pytest.mark.parametrize(("unix_s", "index", "status"), [
+    (None, 0, "time_unknown"), (math.nan, 0, "time_unknown"), (T0 - 1.0, 0, "before_start"),
+    (T0, 0, "in_horizon"), (T0 + 1799.0, 0, "in_horizon"), (T0 + 1800.0, 0, "in_horizon"),  # a tie: the earlier
+    (T0 + 1801.0, 1, "in_horizon"), (T0 + 5000.0, 1, "in_horizon"), (T0 + 7200.0, 2, "in_horizon"),
+    (T0 + 7200.5, 2, "past_horizon"), (T0 + 86400.0, 2, "past_horizon"),
+])
+def test_slice_at_each_status(timed, unix_s, index, status):
+    current = timed.slice_at(unix_s)
+    assert (current.index, current.status) == (index, status)
+    assert current.table is timed.slice_table(index)
+    assert np.array_equal(current.table.actions, timed.slices[index])
+
+
+def test_refused_time_varying_files_say_why(demo_plan, timed):
+    v1, v2 = demo_plan.table.to_bytes(), timed.to_bytes()
+    cases = [
+        (_rewritten(v1, version=2), "format version 2 needs the header's time.slices_utc"),
+        (_rewritten(v2, version=1), "format version 1 has no time slices; the header's time.slices_utc needs version 2"),
+        (_rewritten(v2, header=lambda h: {**h, "time": {**h["time"], "slices_utc": [HOURS[0], HOURS[2], HOURS[1]]}}),
+         r"time.slices_utc\[2\]: 2026-01-15T01:00:00Z is not after the slice before it \(2026-01-15T02:00:00Z\)"),
+        (_rewritten(v2, header=lambda h: {**h, "time": {**h["time"], "slices_utc": [HOURS[0], "2026-01-15T01:00:00+00:00",
+                                                                                     HOURS[2]]}}),
+         r"time.slices_utc\[1\]: expected an ISO 8601 UTC time like 2026-01-15T03:00:00Z"),
+        (_rewritten(v2, header=lambda h: {**h, "time": {**h["time"], "lookup": "linear"}}),
+         'time.lookup: expected "nearest"'),
+        (_rewritten(v2, header=lambda h: {**h, "time": {**h["time"], "slices_utc": [*HOURS, "2026-01-15T03:00:00Z"]}}),
+         "payload declared as .* bytes but the grid 4 x 21 x 29 x 8 needs"),
+        (_rewritten(v2, payload=lambda p: p[:-100]), "payload declared as .* bytes but the grid"),
+    ]
+    for data, message in cases:
+        with pytest.raises(TableError, match=message):
+            PolicyTable.from_bytes(data, name="t.lrpt")
+
+
+def test_a_land_cell_with_an_action_in_a_later_slice_is_refused(demo_plan, timed):
+    assert timed.slices is not None
+    stack = timed.slices.copy()
+    l, j, i = (int(x) for x in np.argwhere(~demo_plan.table.water)[0])
+    stack[2, l, j, i, 3] = int(Action.FORWARD)
+    bad = demo_plan.table.with_slices(HOURS, stack).to_bytes()  # the writer does not check; the reader does
+    with pytest.raises(TableError, match=r"t.lrpt: land cells must carry UNREACHABLE"):
+        PolicyTable.from_bytes(bad, name="t.lrpt")
+
+
+def test_slices_that_barely_change_cost_little_more_than_one(demo_plan):
+    """Each later slice is stored as its change from the one before: unchanged states compress to almost nothing."""
+    table = demo_plan.table
+    one = len(table.to_bytes())
+    same = len(table.with_slices(tuple(f"2026-01-15T{h:02d}:00:00Z" for h in range(10)),
+                                 np.repeat(table.actions[None], 10, axis=0)).to_bytes())
+    assert same < 1.5 * one, (same, one)
+    few = len(table.with_slices(tuple(f"2026-01-15T{h:02d}:00:00Z" for h in range(10)),
+                                _slices(table, 10, np.random.default_rng(3))).to_bytes())
+    assert same < few  # the deltas carry the changes, nothing else
