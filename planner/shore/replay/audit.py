@@ -16,6 +16,12 @@ position and attitude run a decision at their ``time_boot_ms``; a HEARTBEAT
 runs the helm in the set-up phases (``helm.HEARTBEAT_PHASES``). Ticks that have no message
 of their own are found from the events they log: link loss ("link lost: ...")
 and an autopilot reboot ("autopilot time went back ...").
+
+A time-varying table: the vehicle's UTC comes from the logged SYSTEM_TIME as the loop
+learnt it (forgotten at a reboot), and each decision runs with the slice ``PolicyTable.slice_at``
+gives for it, as in the loop (``executive.timeline.follow``). A decision that records another slice is a difference; it is then run again with the
+slice it records, so that its action is checked against the plan the vehicle used and the
+audit goes on from the helm state the vehicle had.
 """
 
 from __future__ import annotations
@@ -25,16 +31,19 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from executive import mavlink_bridge as bridge
+from executive import timeline
 from planner.shore.replay.divelog import DiveLog, LogMessage
+from planner.shore.replay.summary import slices_text
 from executive.helm import HEARTBEAT_PHASES, Decision, HelmConfig, HelmState, step, swapped
 from executive.recorder import LogError, Topic
 from executive.state import VehicleState
 from planner.contract.errors import LrauvError
-from planner.contract.table import PolicyTable
+from planner.contract.table import PolicyTable, TimeSlice
 
 __all__ = ["AuditResult", "Mismatch", "audit"]
 
 _COMPARED = ("cell", "situation", "action", "mode", "changed")  # what a decision is; time and position are inputs
+_SLICE = ("slice", "slice_status")  # time-varying tables only: the plan it was made with
 _LINK_LOST = "link lost:"  # helm._link_lost's event
 _REBOOT = "autopilot time went back"  # Executive._on_message's event
 _DECIDERS = bridge.DECISION_MESSAGES
@@ -49,8 +58,11 @@ class Mismatch:
     audited: Mapping[str, Any] | None
 
     def describe(self) -> str:
+        timed = any(d is not None and "slice" in d for d in (self.logged, self.audited))
+        keys = _COMPARED + _SLICE if timed else _COMPARED
+
         def brief(d: Mapping[str, Any] | None) -> str:
-            return "none" if d is None else ", ".join(f"{k}={d.get(k)}" for k in _COMPARED)
+            return "none" if d is None else ", ".join(f"{k}={d.get(k)}" for k in keys)
 
         return f"t={self.time_s:.3f} s: logged [{brief(self.logged)}] audited [{brief(self.audited)}]"
 
@@ -61,10 +73,25 @@ class AuditResult:
     mismatches: tuple[Mismatch, ...]
     tables: int  # tables used
     swaps: int  # plan swaps applied
+    timed: int = 0  # decisions under a time-varying table, their slice checked too
+    time_varying: tuple[str, ...] = ()  # each time-varying table: "CRC: time-varying, T slices from .. to .."
 
     @property
     def clean(self) -> bool:
         return not self.mismatches
+
+
+@dataclass(frozen=True, slots=True)
+class _Made:
+    """A decision the audit made, and what it was made from (to make it again with another slice)."""
+
+    decision: Decision
+    current: TimeSlice | None
+    helm: HelmState  # before the step
+    now_s: float
+
+    def record(self) -> dict[str, Any]:
+        return timeline.decision_record(self.decision, self.current)
 
 
 @dataclass
@@ -78,9 +105,10 @@ class _Audit:
     helm: HelmState = field(default_factory=HelmState)
     vehicle: VehicleState = field(default_factory=VehicleState)
     last_time: dict[str, float] = field(default_factory=dict)
-    pending: list[Decision] = field(default_factory=list)  # decisions made, not yet matched with the log's
+    pending: list[_Made] = field(default_factory=list)  # decisions made, not yet matched with the log's
     due: tuple[float, bool] | None = None  # a tick the loop ran here: (now_s, link_ok)
     swaps: int = 0
+    unix_offset_s: float | None = None  # SYSTEM_TIME, as the loop holds it: UTC = vehicle time + offset
 
     def run_due(self) -> None:
         """Run the tick the last message called for.
@@ -92,10 +120,30 @@ class _Audit:
             return
         now_s, link_ok = self.due
         self.due = None
-        t = step(self.helm, self.vehicle, self.table, self.config, now_s=now_s, link_ok=link_ok)
-        self.helm = t.helm
+        current = None if self.table is None else self.table.slice_at(timeline.utc_s(now_s, self.unix_offset_s))
+        t = step(self.helm, self.vehicle, None if current is None else current.table, self.config, now_s=now_s,
+                 link_ok=link_ok)
         if t.decision is not None:
-            self.pending.append(t.decision)
+            self.pending.append(_Made(t.decision, current, self.helm, now_s))
+        self.helm = t.helm
+
+    def again(self, made: _Made, logged: Any) -> _Made | None:
+        """``made`` run again with the slice the log records, when that is a slice of the table; else None.
+
+        Only the latest decision can be: the helm has not gone on from it (the log's next decision
+        needs the next message).
+        """
+        table = self.table
+        if (self.pending or table is None or not table.time_varying or made.current is None
+                or isinstance(logged, bool) or not isinstance(logged, int) or not 0 <= logged < table.n_slices):
+            return None
+        current = TimeSlice(table.slice_table(logged), logged, made.current.status)
+        # link_ok: a tick without the link makes no decision
+        t = step(made.helm, self.vehicle, current.table, self.config, now_s=made.now_s, link_ok=True)
+        if t.decision is None:
+            return None
+        self.helm = t.helm
+        return _Made(t.decision, current, made.helm, made.now_s)
 
     def receive(self, m: LogMessage) -> None:
         p = m.payload
@@ -109,6 +157,8 @@ class _Audit:
                 return
             self.last_time[kind] = t_boot
         self.vehicle = bridge.apply(self.vehicle, msg, m.log_time_s)
+        if kind == "SYSTEM_TIME":
+            self.unix_offset_s = bridge.unix_offset_s(msg) or self.unix_offset_s
         if kind in _DECIDERS or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
             self.due = (m.log_time_s if t_boot is None else t_boot, True)
 
@@ -164,7 +214,7 @@ def audit(dive: DiveLog) -> AuditResult:
     tables = logged_tables(dive)
     state: _Audit | None = None
     start_index = int(helm_meta.get("goal_index", "0"))
-    compared = 0
+    compared = timed = 0
     mismatches: list[Mismatch] = []
     for m in dive.messages((Topic.POLICY, Topic.MAVLINK_RX, Topic.DECISION, Topic.LOG)):
         p = m.payload
@@ -186,16 +236,26 @@ def audit(dive: DiveLog) -> AuditResult:
                 state.due = (m.log_time_s, False)
             elif text.startswith(_REBOOT):
                 state.vehicle, state.helm, state.last_time = VehicleState(), HelmState(), {}
+                state.unix_offset_s = None
         elif m.topic is Topic.DECISION:
             compared += 1
-            audited = state.pending.pop(0).to_record() if state.pending else None
-            if audited is None or any(audited[k] != p.get(k) for k in _COMPARED):
+            made = state.pending.pop(0) if state.pending else None
+            audited = None if made is None else made.record()
+            if audited is not None and "slice" in audited:
+                timed += 1
+                if audited["slice"] != p.get("slice"):
+                    # A difference of its own; the action is checked against the slice the vehicle used.
+                    redone = state.again(made, p.get("slice")) if made is not None else None
+                    if redone is not None:
+                        audited = {**redone.record(), **{k: audited[k] for k in _SLICE}}
+            if audited is None or any(audited.get(k) != p.get(k) for k in _COMPARED + _SLICE):
                 mismatches.append(Mismatch(p.get("time_s", m.log_time_s), p, audited))
     if state is not None and dive.complete:  # in a cut log the last decisions may be cut off: not a difference
         state.run_due()
-        mismatches.extend(Mismatch(d.time_s, None, d.to_record()) for d in state.pending)
+        mismatches.extend(Mismatch(d.decision.time_s, None, d.record()) for d in state.pending)
+    varying = tuple(f"{crc}: {slices_text(timeline.slices_record(t))}" for crc, t in tables.items() if t.time_varying)
     return AuditResult(decisions=compared, mismatches=tuple(mismatches), tables=len(tables),
-                       swaps=0 if state is None else state.swaps)
+                       swaps=0 if state is None else state.swaps, timed=timed, time_varying=varying)
 
 
 def _table(tables: Mapping[str, PolicyTable], p: Mapping[str, Any], dive: DiveLog) -> PolicyTable:
@@ -207,5 +267,9 @@ def _table(tables: Mapping[str, PolicyTable], p: Mapping[str, Any], dive: DiveLo
 
 def summary_line(result: AuditResult) -> str:
     verdict = "no difference" if result.clean else f"{len(result.mismatches)} DIFFERENT"
-    return (f"audit      {result.decisions:,} decisions run again with {result.tables} logged table(s),"
+    line = (f"audit      {result.decisions:,} decisions run again with {result.tables} logged table(s),"
             f" {result.swaps} swap(s): {verdict}")
+    if result.time_varying:  # stationary logs keep the line they always had
+        line += (f"\n           {result.timed:,} decisions under a time-varying table, each slice checked against"
+                 " the vehicle's UTC time: " + "; ".join(result.time_varying))
+    return line

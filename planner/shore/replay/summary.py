@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from planner.shore.replay.dive import Dive, Segment
 from planner.contract.geodesy import EARTH_RADIUS_M
 
-__all__ = ["DiveSummary", "Deviation", "format_summary", "summarise"]
+__all__ = ["DiveSummary", "Deviation", "format_summary", "slices_text", "summarise"]
 
 _NORMAL = ("following", "at_goal")  # situations that are not a failsafe
 
@@ -76,6 +76,7 @@ class DiveSummary:
     deviation: Deviation | None
     deviation_note: str | None  # why there is none
     ignored_channels: Mapping[str, int]
+    loaded_time_varying: tuple[Mapping[str, Any], ...] = ()  # loaded policy records of time-varying tables
 
 
 def summarise(dive: Dive, *, nominal: Mapping[int, Polyline] | None = None, nominal_note: str | None = None
@@ -113,6 +114,8 @@ def summarise(dive: Dive, *, nominal: Mapping[int, Polyline] | None = None, nomi
         goals_loaded=tuple(sorted({int(p.get("goal_index", 0)) for p in dive.policy if p.get("reason") == "loaded"})),
         goals_reached=_goals(tr.situation, tr.goal_index, tr.time_s, t_follow),
         deviation=deviation, deviation_note=note, ignored_channels=dict(dive.log.unknown),
+        loaded_time_varying=tuple(p for p in dive.policy
+                                  if p.get("reason") == "loaded" and isinstance(p.get("slices"), dict)),
     )
 
 
@@ -182,6 +185,11 @@ def distance_to_polyline_m(lat_deg: NDArray[np.float64], lon_deg: NDArray[np.flo
     return out
 
 
+def slices_text(slices: Mapping[str, Any]) -> str:
+    """A time-varying table's slices as a policy record gives them (``executive.timeline.slices_record``)."""
+    return f"time-varying, {slices.get('count')} slices from {slices.get('first_utc')} to {slices.get('last_utc')}"
+
+
 def _h(seconds: float) -> str:
     return f"{seconds / 3600:.2f} h"
 
@@ -207,11 +215,15 @@ def format_summary(s: DiveSummary) -> str:
     swaps = [p for p in s.plans if p.get("reason") == "swapped"]
     refused = [p for p in s.plans if p.get("reason") == "refused"]
     lines.append(f"plans      {len(swaps)} swapped in, {len(refused)} refused")
+    for p in s.loaded_time_varying:
+        lines.append(f"  loaded     goal {p.get('goal_index', 0)}, table {p.get('table_crc32')}: {slices_text(p['slices'])}")
     for p in swaps:
         forecast = p.get("forecast") or {}
+        slices = f", {slices_text(p['slices'])}" if isinstance(p.get("slices"), dict) else ""
         lines.append(f"  {p.get('time_s', 0.0):10.1f} s  {p.get('source', '?')}: goal {p.get('goal_index')}, table"
                      f" {(p.get('previous') or {}).get('table_crc32')} -> {p.get('table_crc32')}, forecast"
-                     f" {forecast.get('identity') or p.get('forecast_identity')} ({forecast.get('time') or p.get('forecast_time')})")
+                     f" {forecast.get('identity') or p.get('forecast_identity')} ({forecast.get('time') or p.get('forecast_time')})"
+                     + slices)
     for p in refused:
         lines.append(f"  {p.get('time_s', 0.0):10.1f} s  refused {p.get('refusal')}")
     lines.append(f"failsafes  {len(s.failsafes)}" + ("" if s.failsafes else " (none)"))

@@ -24,6 +24,7 @@ from planner.shore.replay.divelog import open_dive
 from executive.recorder import LogError, RecordStream, Recorder, Topic, read_messages, recover
 from planner.shore.replay.summary import distance_to_polyline_m, summarise
 from planner.cli import main as lrauv
+from planner.contract.actions import Action
 
 from tests.support.helpers import start_west_of_goal
 
@@ -193,6 +194,97 @@ def test_the_audit_notices_a_dropped_decision(dive_log, tmp_path):
     result = audit(open_dive(_rewrite(dive_log, tmp_path / "dropped.mcap", drop_one)))
     assert result.mismatches  # every decision after the gap is paired with the wrong one
     assert result.mismatches[0].logged is not None and result.mismatches[0].audited is not None
+
+
+# -- the audit of a time-varying plan ---------------------------------------------------------------
+
+# The simulated vehicle boots at the forecast's first time (2026-01-15T00:00:00Z) and has a position 41 s
+# later. Slices: the demo plan, DRIFT everywhere, the demo plan again. The nearest slice: before the first
+# until 120 s, the first until 410 s, DRIFT until 800 s, the demo plan until 900 s, then past the horizon.
+SLICE_TIMES = ("2026-01-15T00:02:00Z", "2026-01-15T00:11:40Z", "2026-01-15T00:15:00Z")
+
+
+@pytest.fixture(scope="module")
+def timed_table(demo_plan):
+    base = demo_plan.table
+    drift = np.full(base.actions.shape, int(Action.UNREACHABLE), dtype=np.uint8)
+    drift[base.water] = int(Action.DRIFT)
+    return base.with_slices(SLICE_TIMES, np.stack([base.actions, drift, base.actions]))
+
+
+@pytest.fixture(scope="module")
+def timed_dive_log(timed_table, demo_plan, synthetic_forecast, tmp_path_factory) -> Path:
+    """A dive from two cells west of the goal to the goal under the time-varying table, in lockstep (the same
+    dive on any machine: the slices' times fall where the comment above says)."""
+    from tests.support.lockstep import fly
+
+    log = tmp_path_factory.mktemp("timed-dive") / "timed.mcap"
+    arrived = fly(timed_table, synthetic_forecast, log, start=start_west_of_goal(demo_plan.table, cells=2),
+                  max_vehicle_s=6 * 3600.0)
+    assert arrived is not None and arrived > 900.0
+    return log
+
+
+def test_each_decision_records_the_slice_of_the_vehicles_utc_time(timed_dive_log, timed_table):
+    dive = load_dive(open_dive(timed_dive_log))
+    decisions = _decisions(timed_dive_log)
+    assert dive.unix_offset_s is not None and decisions
+    for d in decisions:
+        current = timed_table.slice_at(d["time_s"] + dive.unix_offset_s)
+        assert (d["slice"], d["slice_status"]) == (current.index, current.status), d
+    seen = {(d["slice"], d["slice_status"]) for d in decisions}
+    assert seen == {(0, "before_start"), (0, "in_horizon"), (1, "in_horizon"), (2, "in_horizon"), (2, "past_horizon")}
+    assert {d["action"] for d in decisions if d["slice"] == 1 and d["situation"] == "following"} == {"DRIFT"}
+    past = [e for e in dive.events if "past the plan's horizon" in e.text]
+    assert [(e.level, e.text) for e in past] == [
+        ("warning", "past the plan's horizon: using the last slice's plan (last slice 2026-01-15T00:15:00Z)")]
+
+
+def test_the_audit_checks_the_slices_of_a_time_varying_plan(timed_dive_log, timed_table, capsys):
+    result = audit(open_dive(timed_dive_log))
+    decisions = _decisions(timed_dive_log)
+    assert result.clean, [m.describe() for m in result.mismatches[:5]]
+    assert result.decisions == result.timed == len(decisions)
+    crc = f"{timed_table.crc32:08x}"
+    assert result.time_varying == (f"{crc}: time-varying, 3 slices from 2026-01-15T00:02:00Z to 2026-01-15T00:15:00Z",)
+    assert lrauv(["replay", str(timed_dive_log)]) == 0
+    out = capsys.readouterr().out
+    assert (f"  loaded     goal 0, table {crc}: time-varying, 3 slices from 2026-01-15T00:02:00Z to"
+            " 2026-01-15T00:15:00Z") in out
+    assert f"{len(decisions):,} decisions under a time-varying table, each slice checked" in out
+
+
+def _with_slice(victim: int, slice_index: int) -> Callable[[str, Message], bytes]:
+    seen = {"n": -1}
+
+    def tamper(topic: str, m: Message) -> bytes:
+        if topic != Topic.DECISION.value:
+            return m.data
+        seen["n"] += 1
+        return m.data if seen["n"] != victim else json.dumps({**json.loads(m.data), "slice": slice_index}).encode()
+
+    return tamper
+
+
+def test_a_decision_that_records_another_slice_is_a_difference(timed_dive_log, timed_table, tmp_path):
+    decisions = _decisions(timed_dive_log)
+    # Slices 0 and 2 have the same actions: the slice alone differs, and the audit goes on from the same helm.
+    victim = next(n for n, d in enumerate(decisions) if d["slice"] == 2 and d["situation"] == "following")
+    result = audit(open_dive(_rewrite(timed_dive_log, tmp_path / "slice.mcap", _with_slice(victim, 0))))
+    assert [m.time_s for m in result.mismatches] == [decisions[victim]["time_s"]]
+    mismatch = result.mismatches[0]
+    assert mismatch.logged is not None and mismatch.audited is not None
+    assert (mismatch.logged["slice"], mismatch.audited["slice"]) == (0, 2)
+    assert mismatch.logged["action"] == mismatch.audited["action"]
+    assert "slice=0" in mismatch.describe() and "slice=2" in mismatch.describe()
+    # A DRIFT decision that claims the first slice: checked against that slice's plan, which is not DRIFT there.
+    demo = timed_table.slice_table(0).actions
+    drift = next(n for n, d in enumerate(decisions) if d["slice"] == 1 and d["situation"] == "following"
+                 and d["action"] == "DRIFT" and demo[tuple(d["cell"])] != Action.DRIFT)
+    result = audit(open_dive(_rewrite(timed_dive_log, tmp_path / "drift.mcap", _with_slice(drift, 0))))
+    first = result.mismatches[0]
+    assert first.time_s == decisions[drift]["time_s"] and first.audited is not None
+    assert first.audited["slice"] == 1 and first.audited["action"] != "DRIFT"
 
 
 # -- damaged and foreign files ---------------------------------------------------------------------
