@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import lzma
 import math
 import subprocess
 import sys
@@ -180,8 +181,10 @@ def _rewritten(data: bytes, *, version: int | None = None, header=lambda h: h, p
     head = json.dumps(header(json.loads(data[16:16 + header_len])), sort_keys=True, separators=(",", ":")).encode()
     stored_len, _raw_len = struct.unpack_from("<II", data, 16 + header_len)
     stored = data[24 + header_len:24 + header_len + stored_len]
-    raw = payload(zlib.decompress(stored) if flags & 1 else stored)
-    stored = zlib.compress(raw, 9) if flags & 1 else raw
+    raw = payload(zlib.decompress(stored) if flags & 1 else lzma.decompress(stored) if flags & 2 else stored)
+    if flags & 2 and version == 1:  # xz is version 2's alone: a version-1 rewrite stores zlib
+        flags = 1
+    stored = zlib.compress(raw, 9) if flags & 1 else lzma.compress(raw) if flags & 2 else raw
     body = (struct.pack("<8sHHI", magic, ver if version is None else version, flags, len(head)) + head
             + struct.pack("<II", len(stored), len(raw)) + stored)
     return body + zlib.crc32(body).to_bytes(4, "little")
