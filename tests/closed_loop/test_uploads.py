@@ -31,6 +31,7 @@ from planner.contract.settings import Goal  # noqa: E402
 from planner.contract.mission import goals_to_items  # noqa: E402
 
 from tests.support.helpers import DEMO_MISSION, plan_for, start_west_of_goal  # noqa: E402
+from vehicle_sim.autopilot import AutopilotSettings  # noqa: E402
 from tests.support.live_rig import Live  # noqa: E402
 
 DEMO = DEMO_MISSION
@@ -199,7 +200,11 @@ def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_for
     second = _plan(synthetic_forecast, second_goal) if second_table == "planned on shore" else None
     goals = (replace(mission.goals[0], on_arrival="next"), replace(mission.goals[0], goal=second_goal, on_arrival="hold"))
     plan = goal_tables.MissionPlan(goals=goals, tables=(first, second))
-    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0)
+    # The GCS heartbeat failsafe is the link-fault tests' subject. Here, at 1000x, its 5 vehicle seconds
+    # are 5 ms of wall time: on a busy machine planning onboard, a late heartbeat would surface the
+    # vehicle off the goal and make it reach it again, so this test turns it off (FS_GCS_ENABLE 0).
+    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0,
+               autopilot=AutopilotSettings(heartbeat_timeout_s=0.0))
     summary = rig.join(120.0)
     assert summary.reached and rig.executive.plan.index == 1
     events = _events(tmp_path / "exec.mcap")

@@ -14,6 +14,7 @@ from executive.helm import HelmConfig  # noqa: E402
 from executive.loop import ExecConfig, Executive  # noqa: E402
 from executive.state import Phase  # noqa: E402
 from tests.support.helpers import DEMO_MISSION, assert_audit_clean, wait_until  # noqa: E402
+from vehicle_sim.autopilot import AutopilotSettings  # noqa: E402
 from vehicle_sim.endpoint import SimConfig, Simulator  # noqa: E402
 from vehicle_sim.world import World  # noqa: E402
 
@@ -27,12 +28,13 @@ class Live:
     def __init__(self, forecast: Path, plan: goal_tables.MissionPlan, log: Path, *, start: tuple[float, float],
                  mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False,
                  speedup: float = SPEEDUP, start_depth_m: float = 0.0, replan_period_s: float | None = None,
-                 signing=None, **helm) -> None:  # type: ignore[no-untyped-def]
+                 signing=None, autopilot: AutopilotSettings | None = None, **helm) -> None:  # type: ignore[no-untyped-def]
         # The vehicle boots 6.5 h into the forecast, after issue 1's issue time (6 h): a newer
         # issue that arrives during the run is then one that exists at that time.
         self.sim = Simulator(World.load(forecast), SimConfig(start_lon_deg=start[0], start_lat_deg=start[1], port=0,
                                                              speedup=speedup, seed=3, start_offset_s=6.5 * 3600,
-                                                             start_depth_m=start_depth_m))
+                                                             start_depth_m=start_depth_m,
+                                                             autopilot=autopilot or AutopilotSettings()))
         config = ExecConfig(link=f"udpout:127.0.0.1:{self.sim.port}", log_path=log, gcs_link="udpin:127.0.0.1:0",
                             mission_path=mission, watch_dir=watch, work_dir=log.parent / "work", max_wall_s=120.0,
                             exit_on_arrival=exit_on_arrival, linger_s=5.0, replan_period_s=replan_period_s,
