@@ -83,10 +83,18 @@ def table_settings(table: PolicyTable) -> PlanSettings:
             raise ShoreError(f"{name}: header physical: {exc}; planned by a newer planner?") from None
         except ValueError as exc:
             raise ShoreError(f"{name}: header physical: {exc}") from None
+    # A time-varying plan: its slices span the horizon, evenly spaced or at the forecast's own steps.
+    time_varying, horizon_h, slice_h = False, 72.0, None
+    if table.time_varying:
+        times = np.asarray(table.slice_unix_s)
+        gaps = np.diff(times)
+        time_varying, horizon_h = True, float(times[-1] - times[0]) / 3600.0
+        slice_h = float(gaps[0]) / 3600.0 if np.all(np.abs(gaps - gaps[0]) < 1.0) else None
     # The header's words as read: PlanSettings checks them, with its own messages.
     return PlanSettings(model=cast(Model, table.model), criterion=cast(Criterion, table.criterion),
                         uncertainty=cast(Uncertainty, table.uncertainty),
-                        costs=costs, physical=physical, vehicle=vehicle)
+                        costs=costs, physical=physical, vehicle=vehicle, time_varying=time_varying,
+                        horizon_h=horizon_h, slice_h=slice_h)
 
 
 def plan_again(table: PolicyTable, forecast: str | os.PathLike[str]) -> PlanResult:
@@ -103,9 +111,14 @@ def plan_again(table: PolicyTable, forecast: str | os.PathLike[str]) -> PlanResu
         nx=table.nx, ny=table.ny, time_iso=table.forecast_time,
     )
     result = make_plan(request)
-    differ = int(np.count_nonzero(result.table.actions != table.actions))
+    again = result.table
+    if again.slice_times != table.slice_times:
+        raise ShoreError(f"{forecast}: planning table {table.crc32:08x} again gives {again.n_slices} time slice(s) from "
+                         f"{again.forecast_time}; the table has {table.n_slices} from {table.forecast_time}")
+    differ = int(np.count_nonzero(again.actions != table.actions) if again.slices is None
+                 else np.count_nonzero(again.slices != table.slices))
     if differ:
-        raise ShoreError(f"{forecast}: planning table {table.crc32:08x} again gives {differ:,} of {table.n_states:,}"
+        raise ShoreError(f"{forecast}: planning table {table.crc32:08x} again gives {differ:,} of {table.n_states * table.n_slices:,}"
                            " actions that differ from the table; it was not planned on this forecast and step"
                            " with these settings")
     return result

@@ -205,3 +205,18 @@ def test_slices_every_few_steps_or_a_clear_refusal(gyre_file):
     assert slice_steps(f, 1, 4.0, 3.0) == [1, 4]
     with pytest.raises(ForecastError, match="slice_h = 1.5 h is not a whole number of the forecast's steps"):
         slice_steps(f, 0, 4.0, 1.5)
+
+
+def test_replay_plans_a_time_varying_table_again_from_its_header(gyre_file, tmp_path):
+    from planner.contract.errors import ShoreError
+    from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
+    from planner.pipeline import make_plan
+    from planner.shore.replay.nominal import plan_again
+
+    table = make_plan(gyre_request(gyre_file, horizon_h=2.0)).table
+    again = plan_again(table, gyre_file)
+    assert np.array_equal(again.table.slices, table.slices) and again.table.slice_times == table.slice_times
+    other = write_gyre(tmp_path / "other.nc", DoubleGyreSettings(eps=0.25, phase_rad=1.0, hours=4.0, step_h=1.0,
+                                                                depths_m=(0.0, 5.0)))
+    with pytest.raises(ShoreError, match=r"actions that differ from the table"):
+        plan_again(table, other)
