@@ -174,6 +174,9 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     if criterion not in CRITERIA[model]:
         source = "" if args.criterion else f" (from {mission.path if mission is not None else 'the default'}; give --criterion)"
         raise LrauvError(f"--criterion: the {model} model has {' and '.join(CRITERIA[model])}; got {criterion!r}{source}")
+    for flag, value in (("--slice-h", args.slice_h), ("--horizon-h", args.horizon_h)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise LrauvError(f"{flag}: expected a number of hours > 0; got {value:g}")
     measured = base.error_measured
     physical = base.physical
     if args.current_error is not None:
