@@ -9,6 +9,7 @@ settings, and a bad one names its option.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import pathlib
 from pathlib import Path
@@ -154,55 +155,35 @@ def settings_from_args(args: argparse.Namespace) -> Any:
     """``DoubleGyreSettings`` from ``lrauv forecast gyre``'s options; bad values raise ``PlannerError`` naming the option."""
     from planner.forecast.synthetic.double_gyre import DoubleGyreSettings
 
-    default = DoubleGyreSettings()  # the value of each option not given
-
-    def given(name: str) -> Any:  # argparse values are untyped; the settings check them
-        value = getattr(args, name, None)
-        return getattr(default, name) if value is None else value
-
-    west, south, east, north, depths = _box_and_depths(args, default)
-    try:
-        return DoubleGyreSettings(
-            west_deg=west, south_deg=south, east_deg=east, north_deg=north, depths_m=depths,
-            spacing_deg=given("spacing_deg"), hours=given("hours"), step_h=given("step_h"),
-            issue_time=given("issue_time"), peak_speed_m_s=given("peak_speed_m_s"), eps=given("eps"),
-            period_h=given("period_h"), phase_rad=given("phase_rad"),
-        )
-    except PlannerError as exc:
-        field = getattr(exc, "field", None)  # the settings' errors carry the field they refuse
-        if field is None:
-            raise
-        raise PlannerError(f"{GYRE_OPTIONS.get(field, field)}: {exc}") from None
+    return _settings_from(args, DoubleGyreSettings, GYRE_OPTIONS)
 
 
 def tidal_settings_from_args(args: argparse.Namespace) -> Any:
     """``TidalSettings`` from ``lrauv forecast tidal``'s options, forecast error applied; bad values name the option."""
     from planner.forecast.synthetic.tidal import TidalSettings, with_forecast_error
 
-    default = TidalSettings()  # the value of each option not given
+    phase_error_h = getattr(args, "phase_error_h", None)
+    amplitude_error = getattr(args, "amplitude_error", None)
+    return _settings_from(args, TidalSettings, TIDAL_OPTIONS, then=lambda settings: with_forecast_error(
+        settings, phase_error_h=0.0 if phase_error_h is None else phase_error_h,
+        amplitude_error=0.0 if amplitude_error is None else amplitude_error))
 
-    def given(name: str) -> Any:  # argparse values are untyped; the settings check them
-        value = getattr(args, name, None)
-        return getattr(default, name) if value is None else value
 
+def _settings_from(args: argparse.Namespace, cls: Any, options: dict[str, str], then: Any = lambda s: s) -> Any:
+    """An analytic source's settings from the options of the same names (a default for each option not
+    given), ``then`` applied; a refused value raises ``PlannerError`` naming its option."""
+    default = cls()
     west, south, east, north, depths = _box_and_depths(args, default)
+    box = {"west_deg": west, "south_deg": south, "east_deg": east, "north_deg": north, "depths_m": depths}
+    values = {f.name: getattr(default, f.name) if getattr(args, f.name, None) is None else getattr(args, f.name)
+              for f in dataclasses.fields(cls) if f.name not in box}  # argparse values are untyped: the settings check them
     try:
-        settings = TidalSettings(
-            west_deg=west, south_deg=south, east_deg=east, north_deg=north, depths_m=depths,
-            spacing_deg=given("spacing_deg"), hours=given("hours"), step_h=given("step_h"),
-            issue_time=given("issue_time"), amplitude_m_s=given("amplitude_m_s"), period_h=given("period_h"),
-            phase_rad=given("phase_rad"), residual_m_s=given("residual_m_s"), mouth_width_m=given("mouth_width_m"),
-            neck_width_m=given("neck_width_m"), neck_length_m=given("neck_length_m"),
-        )
-        phase_error_h = getattr(args, "phase_error_h", None)
-        amplitude_error = getattr(args, "amplitude_error", None)
-        return with_forecast_error(settings, phase_error_h=0.0 if phase_error_h is None else phase_error_h,
-                                   amplitude_error=0.0 if amplitude_error is None else amplitude_error)
+        return then(cls(**box, **values))
     except PlannerError as exc:
         field = getattr(exc, "field", None)  # the settings' errors carry the field they refuse
         if field is None:
             raise
-        raise PlannerError(f"{TIDAL_OPTIONS.get(field, field)}: {exc}") from None
+        raise PlannerError(f"{options.get(field, field)}: {exc}") from None
 
 
 def write_ensemble_from_args(args: argparse.Namespace) -> pathlib.Path:

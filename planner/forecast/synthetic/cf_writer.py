@@ -85,6 +85,29 @@ def coordinates(
     }
 
 
+def layered_dataset(
+    u_m_s: NDArray[np.floating], v_m_s: NDArray[np.floating], *, lon: NDArray[np.float64], lat: NDArray[np.float64],
+    depth: NDArray[np.float64], hours: NDArray[np.float64], issued: dt.datetime, attrs: dict[str, object],
+) -> xr.Dataset:
+    """A two-dimensional field ``(time, lat, lon)`` the same at every depth, as a CF-1.8 dataset whose
+    time axis is ``hours`` since ``issued``: the analytic sources' files (double gyre, tidal channel)."""
+    shape = (hours.size, depth.size, lat.size, lon.size)
+    u4 = np.broadcast_to(u_m_s[:, None].astype(np.float32), shape).copy()
+    v4 = np.broadcast_to(v_m_s[:, None].astype(np.float32), shape).copy()
+    origin = issued.replace(tzinfo=None)
+    times = np.datetime64(origin, "ns") + np.round(hours * 3.6e12).astype("timedelta64[ns]")
+    ds = xr.Dataset(data_vars={"u": (DIMS, u4, dict(U_ATTRS)), "v": (DIMS, v4, dict(V_ATTRS))},
+                    coords=coordinates(times, depth, lat, lon), attrs=attrs)
+    set_time_units(ds, origin)
+    return ds
+
+
+def write_dataset(path: str | os.PathLike[str], ds: xr.Dataset) -> pathlib.Path:
+    """``ds`` as netCDF-4 with the time axis in hours, atomically (``write_netcdf``)."""
+    ds = with_numeric_time(ds)
+    return write_netcdf(path, ds, netcdf_encoding(ds))
+
+
 def set_time_units(ds: xr.Dataset, origin: dt.datetime) -> None:
     """Encode the time axis as float hours since ``origin`` (naive UTC), standard calendar."""
     ds["time"].encoding.update({"units": f"hours since {origin:%Y-%m-%d %H:%M:%S}", "calendar": "standard",

@@ -72,17 +72,11 @@ from numpy.typing import ArrayLike, NDArray
 from planner.contract.errors import LrauvError, PlannerError
 from planner.contract.geodesy import EARTH_RADIUS_M
 from planner.forecast.synthetic.cf_writer import (
-    DIMS,
-    U_ATTRS,
-    V_ATTRS,
-    coordinates,
     grid_counts,
+    layered_dataset,
     lon_lat_axes,
-    netcdf_encoding,
     parse_time,
-    set_time_units,
-    with_numeric_time,
-    write_netcdf,
+    write_dataset,
 )
 
 __all__ = [
@@ -306,10 +300,9 @@ def synthesize_tidal(settings: TidalSettings = TidalSettings()) -> xr.Dataset:
     lon, lat, hours = tidal_axes(settings)
     depth = np.asarray(settings.depths_m, dtype=np.float64)
     u, v = tidal_velocity(settings, hours[:, None, None] * 3600.0, lat[:, None], lon[None, :], 0.0)
-    shape = (hours.size, depth.size, lat.size, lon.size)
-    u4 = np.broadcast_to(u[:, None].astype(np.float32), shape).copy()
-    v4 = np.broadcast_to(v[:, None].astype(np.float32), shape).copy()
-    return _dataset(settings, lon, lat, depth, hours, u4, v4)
+    issued = parse_time(settings.issue_time)
+    return layered_dataset(u, v, lon=lon, lat=lat, depth=depth, hours=hours, issued=issued,
+                           attrs=global_attrs(settings, issued, float(hours[-1])))
 
 
 def write_tidal(
@@ -320,33 +313,10 @@ def write_tidal(
     Readers never see a partial file; a failure leaves the old file, if any, and
     no temporary file. Missing parent folders are created. Returns the path.
     """
-    ds = with_numeric_time(synthesize_tidal(settings))
-    return write_netcdf(path, ds, netcdf_encoding(ds))
+    return write_dataset(path, synthesize_tidal(settings))
 
 
 # --------------------------------------------------------------------------- dataset
-
-
-def _dataset(
-    settings: TidalSettings,
-    lon: NDArray[np.float64],
-    lat: NDArray[np.float64],
-    depth: NDArray[np.float64],
-    hours: NDArray[np.float64],
-    u: NDArray[np.float32],
-    v: NDArray[np.float32],
-) -> xr.Dataset:
-    """Wrap the arrays in CF-1.8 metadata, as ``planner.forecast.synthetic.double_gyre`` does."""
-    issued = parse_time(settings.issue_time)
-    origin = issued.replace(tzinfo=None)
-    times = np.datetime64(origin, "ns") + np.round(hours * 3.6e12).astype("timedelta64[ns]")
-    ds = xr.Dataset(
-        data_vars={"u": (DIMS, u, dict(U_ATTRS)), "v": (DIMS, v, dict(V_ATTRS))},
-        coords=coordinates(times, depth, lat, lon),
-        attrs=global_attrs(settings, issued, float(hours[-1])),
-    )
-    set_time_units(ds, origin)
-    return ds
 
 
 def global_attrs(settings: TidalSettings, issued: dt.datetime, last_h: float) -> dict[str, object]:
