@@ -10,9 +10,10 @@ model file.
 from __future__ import annotations
 
 import datetime as dt
+import math
 import os
 import pathlib
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import xarray as xr
@@ -40,6 +41,62 @@ class GridBox(Protocol):
     def north_deg(self) -> float: ...
     @property
     def spacing_deg(self) -> float: ...
+
+
+class FieldError(PlannerError):
+    """A bad settings field; ``field`` lets ``planner.cli.forecast`` name the command-line option."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+
+def check_field(ok: object, what: str, name: str, expected: str, got: object) -> None:
+    """Raise ``FieldError`` for ``name`` of ``what`` ("tidal settings") unless ``ok``."""
+    if not ok:
+        raise FieldError(name, f"{what}: `{name}` must be {expected}; got {got!r}")
+
+
+def is_number(value: object) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+
+
+def check_analytic(settings: object, scalars: tuple[str, ...], what: str) -> None:
+    """The checks an analytic source's frozen settings share: its box, spacing, depths and times.
+
+    ``scalars`` (the box's four edges among them) must be finite numbers and become floats; the
+    depths a strictly increasing tuple of floats >= 0; ``step_h <= hours``; ``issue_time`` ISO 8601.
+    """
+    s: Any = settings
+    edges = ("west_deg", "south_deg", "east_deg", "north_deg")
+    for name in scalars:
+        value = getattr(s, name)
+        check_field(is_number(value) and math.isfinite(value), what, "bbox" if name in edges else name,
+                    "a finite number", value)
+        object.__setattr__(s, name, float(value))
+    check_field(np.ndim(s.depths_m) == 1 and all(is_number(d) for d in s.depths_m), what,
+                "depths_m", "a sequence of numbers", s.depths_m)
+    object.__setattr__(s, "depths_m", tuple(float(d) for d in s.depths_m))
+    box = (s.west_deg, s.south_deg, s.east_deg, s.north_deg)
+    check_field(s.west_deg < s.east_deg and s.south_deg < s.north_deg and -90.0 < s.south_deg and s.north_deg < 90.0
+                and s.east_deg - s.west_deg <= 360.0, what, "bbox", "WEST < EAST and -90 < SOUTH < NORTH < 90", box)
+    check_field(s.spacing_deg > 0, what, "spacing_deg", "a number > 0", s.spacing_deg)
+    nx, ny = grid_counts(s)
+    check_field(nx >= 2 and ny >= 2, what, "spacing_deg", f"small enough for 2 points per axis in the box {box}",
+                s.spacing_deg)
+    depths = np.asarray(s.depths_m)
+    check_field(depths.size >= 1 and bool(np.all(np.isfinite(depths))) and bool(np.all(depths >= 0))
+                and bool(np.all(np.diff(depths) > 0)), what,
+                "depths_m", "non-negative depths in metres, strictly increasing", s.depths_m)
+    check_field(s.hours > 0, what, "hours", "a number > 0", s.hours)
+    check_field(s.step_h > 0, what, "step_h", "a number > 0", s.step_h)
+    if s.step_h > s.hours:  # names both: either option may be the wrong one
+        raise FieldError("hours, step_h", f"{what}: `step_h` must be at most `hours` "
+                         f"(two time steps at least); got step_h={s.step_h:g}, hours={s.hours:g}")
+    try:
+        parse_time(s.issue_time)
+    except PlannerError:
+        check_field(False, what, "issue_time", "an ISO 8601 time like 2026-01-15T00:00:00Z", s.issue_time)
 
 
 def parse_time(text: str) -> dt.datetime:

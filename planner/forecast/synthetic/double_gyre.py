@@ -51,10 +51,10 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from planner.contract.errors import LrauvError, PlannerError
 from planner.contract.geodesy import EARTH_RADIUS_M
 from planner.forecast.synthetic.cf_writer import (
-    grid_counts,
+    check_analytic,
+    check_field,
     layered_dataset,
     lon_lat_axes,
     parse_time,
@@ -80,21 +80,8 @@ _REFERENCE = (
 )
 
 
-class _FieldError(PlannerError):
-    """A bad settings field; ``field`` lets ``planner.cli.forecast`` name the command-line option."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
-        self.field = field
-
-
 def _check(ok: object, name: str, expected: str, got: object) -> None:
-    if not ok:
-        raise _FieldError(name, f"double gyre settings: `{name}` must be {expected}; got {got!r}")
-
-
-def _is_number(value: object) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    check_field(ok, "double gyre settings", name, expected, got)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -125,35 +112,7 @@ class DoubleGyreSettings:
     def __post_init__(self) -> None:
         scalars = ("west_deg", "south_deg", "east_deg", "north_deg", "spacing_deg", "hours", "step_h",
                    "peak_speed_m_s", "eps", "period_h", "phase_rad")
-        for name in scalars:
-            value = getattr(self, name)
-            field = "bbox" if name in ("west_deg", "south_deg", "east_deg", "north_deg") else name
-            _check(_is_number(value) and math.isfinite(value), field, "a finite number", value)
-            object.__setattr__(self, name, float(value))
-        _check(np.ndim(self.depths_m) == 1 and all(_is_number(d) for d in self.depths_m),
-               "depths_m", "a sequence of numbers", self.depths_m)
-        object.__setattr__(self, "depths_m", tuple(float(d) for d in self.depths_m))
-        box = (self.west_deg, self.south_deg, self.east_deg, self.north_deg)
-        _check(self.west_deg < self.east_deg and self.south_deg < self.north_deg
-               and -90.0 < self.south_deg and self.north_deg < 90.0 and self.east_deg - self.west_deg <= 360.0,
-               "bbox", "WEST < EAST and -90 < SOUTH < NORTH < 90", box)
-        _check(self.spacing_deg > 0, "spacing_deg", "a number > 0", self.spacing_deg)
-        nx, ny = grid_counts(self)
-        _check(nx >= 2 and ny >= 2, "spacing_deg", f"small enough for 2 points per axis in the box {box}",
-               self.spacing_deg)
-        depths = np.asarray(self.depths_m)
-        _check(depths.size >= 1 and bool(np.all(np.isfinite(depths))) and bool(np.all(depths >= 0))
-               and bool(np.all(np.diff(depths) > 0)),
-               "depths_m", "non-negative depths in metres, strictly increasing", self.depths_m)
-        _check(self.hours > 0, "hours", "a number > 0", self.hours)
-        _check(self.step_h > 0, "step_h", "a number > 0", self.step_h)
-        if self.step_h > self.hours:  # names both: either option may be the wrong one
-            raise _FieldError("hours, step_h", f"double gyre settings: `step_h` must be at most `hours` "
-                              f"(two time steps at least); got step_h={self.step_h:g}, hours={self.hours:g}")
-        try:
-            parse_time(self.issue_time)
-        except LrauvError:
-            _check(False, "issue_time", "an ISO 8601 time like 2026-01-15T00:00:00Z", self.issue_time)
+        check_analytic(self, scalars, "double gyre settings")
         _check(self.peak_speed_m_s > 0, "peak_speed_m_s", "a speed > 0 in m/s", self.peak_speed_m_s)
         _check(0.0 <= self.eps <= 0.5, "eps", "in [0, 0.5] (f(x, t) must stay increasing in x)", self.eps)
         _check(self.period_h > 0, "period_h", "a period > 0 in hours", self.period_h)

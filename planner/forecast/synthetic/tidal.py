@@ -69,10 +69,12 @@ import numpy as np
 import xarray as xr
 from numpy.typing import ArrayLike, NDArray
 
-from planner.contract.errors import LrauvError, PlannerError
 from planner.contract.geodesy import EARTH_RADIUS_M
 from planner.forecast.synthetic.cf_writer import (
-    grid_counts,
+    FieldError,
+    check_analytic,
+    check_field,
+    is_number,
     layered_dataset,
     lon_lat_axes,
     parse_time,
@@ -103,21 +105,8 @@ _REFERENCE = ("M2 constituent speed 28.9841042 deg/h: NOAA CO-OPS, harmonic cons
               "potential, Proc. R. Soc. A 100 (1921) 305-329")
 
 
-class _FieldError(PlannerError):
-    """A bad settings field; ``field`` lets ``planner.cli.forecast`` name the command-line option."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
-        self.field = field
-
-
 def _check(ok: object, name: str, expected: str, got: object) -> None:
-    if not ok:
-        raise _FieldError(name, f"tidal settings: `{name}` must be {expected}; got {got!r}")
-
-
-def _is_number(value: object) -> bool:
-    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    check_field(ok, "tidal settings", name, expected, got)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -152,35 +141,7 @@ class TidalSettings:
         scalars = ("west_deg", "south_deg", "east_deg", "north_deg", "spacing_deg", "hours", "step_h",
                    "amplitude_m_s", "period_h", "phase_rad", "residual_m_s", "mouth_width_m", "neck_width_m",
                    "neck_length_m")
-        for name in scalars:
-            value = getattr(self, name)
-            field = "bbox" if name in ("west_deg", "south_deg", "east_deg", "north_deg") else name
-            _check(_is_number(value) and math.isfinite(value), field, "a finite number", value)
-            object.__setattr__(self, name, float(value))
-        _check(np.ndim(self.depths_m) == 1 and all(_is_number(d) for d in self.depths_m),
-               "depths_m", "a sequence of numbers", self.depths_m)
-        object.__setattr__(self, "depths_m", tuple(float(d) for d in self.depths_m))
-        box = (self.west_deg, self.south_deg, self.east_deg, self.north_deg)
-        _check(self.west_deg < self.east_deg and self.south_deg < self.north_deg
-               and -90.0 < self.south_deg and self.north_deg < 90.0 and self.east_deg - self.west_deg <= 360.0,
-               "bbox", "WEST < EAST and -90 < SOUTH < NORTH < 90", box)
-        _check(self.spacing_deg > 0, "spacing_deg", "a number > 0", self.spacing_deg)
-        nx, ny = grid_counts(self)
-        _check(nx >= 2 and ny >= 2, "spacing_deg", f"small enough for 2 points per axis in the box {box}",
-               self.spacing_deg)
-        depths = np.asarray(self.depths_m)
-        _check(depths.size >= 1 and bool(np.all(np.isfinite(depths))) and bool(np.all(depths >= 0))
-               and bool(np.all(np.diff(depths) > 0)),
-               "depths_m", "non-negative depths in metres, strictly increasing", self.depths_m)
-        _check(self.hours > 0, "hours", "a number > 0", self.hours)
-        _check(self.step_h > 0, "step_h", "a number > 0", self.step_h)
-        if self.step_h > self.hours:  # names both: either option may be the wrong one
-            raise _FieldError("hours, step_h", f"tidal settings: `step_h` must be at most `hours` "
-                              f"(two time steps at least); got step_h={self.step_h:g}, hours={self.hours:g}")
-        try:
-            parse_time(self.issue_time)
-        except LrauvError:
-            _check(False, "issue_time", "an ISO 8601 time like 2026-01-15T00:00:00Z", self.issue_time)
+        check_analytic(self, scalars, "tidal settings")
         _check(self.amplitude_m_s >= 0, "amplitude_m_s", "a speed >= 0 in m/s", self.amplitude_m_s)
         _check(self.period_h > 0, "period_h", "a period > 0 in hours", self.period_h)
         _check(self.neck_width_m > 0, "neck_width_m", "a width > 0 in metres", self.neck_width_m)
@@ -190,7 +151,7 @@ class TidalSettings:
         _check(self.neck_length_m > 0, "neck_length_m", "a length > 0 in metres", self.neck_length_m)
         height_m = box_size_m(self)[1]
         if self.mouth_width_m > height_m:  # names both: the box or the channel may be the wrong one
-            raise _FieldError("bbox, mouth_width_m", f"tidal settings: `mouth_width_m` must fit in the `bbox`'s "
+            raise FieldError("bbox, mouth_width_m", f"tidal settings: `mouth_width_m` must fit in the `bbox`'s "
                               f"height ({height_m:.0f} m) so that both coasts lie inside it; "
                               f"got mouth_width_m={self.mouth_width_m:g}")
         # A neck narrower than two grid rows could close the channel on the grid.
@@ -208,9 +169,9 @@ def with_forecast_error(truth: TidalSettings, *, phase_error_h: float = 0.0,
     The phase moves by ``2 pi phase_error_h / period_h``, so the forecast at ``t`` is the
     truth's tide at ``t + phase_error_h`` (the residual is unchanged).
     """
-    _check(_is_number(phase_error_h) and math.isfinite(phase_error_h), "phase_error_h",
+    _check(is_number(phase_error_h) and math.isfinite(phase_error_h), "phase_error_h",
            "a finite number of hours", phase_error_h)
-    _check(_is_number(amplitude_error) and math.isfinite(amplitude_error) and amplitude_error >= -1.0,
+    _check(is_number(amplitude_error) and math.isfinite(amplitude_error) and amplitude_error >= -1.0,
            "amplitude_error", "a finite number >= -1 (the amplitude is multiplied by 1 + amplitude_error)",
            amplitude_error)
     phase = truth.phase_rad + 2.0 * math.pi * float(phase_error_h) / truth.period_h
