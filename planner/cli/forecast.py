@@ -75,12 +75,7 @@ def add_parser(sub: Subcommands) -> None:
     gyre.add_argument("--eps", type=float, help="oscillation amplitude of the dividing line, 0..0.5 (default 0.1; 0 = steady)")
     gyre.add_argument("--period-h", type=float, help="oscillation period in hours (default 12)")
     gyre.add_argument("--phase-rad", type=float, help="oscillation phase at the issue time, radians (default 0)")
-    gyre.add_argument("--hours", type=float, help="forecast length in hours (default 48)")
-    gyre.add_argument("--step-h", type=float, help="time step in hours (default 1)")
-    gyre.add_argument("--spacing-deg", type=float, help="grid spacing in degrees (default 0.005)")
-    gyre.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.467)")
-    gyre.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
-    gyre.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+    _grid_and_time_options(gyre, hours=48, bbox="-118.2,33.3,-117.8,33.467")
 
     tidal = fsub.add_parser("tidal", help="write an M2 tidal current through a channel with a constriction as a forecast")
     tidal.add_argument("out", type=Path)
@@ -95,12 +90,7 @@ def add_parser(sub: Subcommands) -> None:
                        help="forecast error: the tide runs H hours early (phase + 2 pi H / period; default 0)")
     tidal.add_argument("--amplitude-error", type=float,
                        help="forecast error: amplitude times 1 + F, F >= -1 (default 0)")
-    tidal.add_argument("--hours", type=float, help="forecast length in hours (default 72)")
-    tidal.add_argument("--step-h", type=float, help="time step in hours (default 1)")
-    tidal.add_argument("--spacing-deg", type=float, help="grid spacing in degrees (default 0.005)")
-    tidal.add_argument("--bbox", help="WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default -118.2,33.3,-117.8,33.5)")
-    tidal.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
-    tidal.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
+    _grid_and_time_options(tidal, hours=72, bbox="-118.2,33.3,-117.8,33.5")
 
     ens = fsub.add_parser("ensemble", help="write a synthetic forecast ensemble: one file, u/v with a leading member dimension")
     ens.add_argument("out", type=Path)
@@ -120,6 +110,16 @@ def add_parser(sub: Subcommands) -> None:
     ens.add_argument("--depths", help="gyre: layer depths in metres (default 0,5,10,15)")
     ens.add_argument("--issue-time", help="gyre: ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
     ens.add_argument("--issue", type=int, help="scb: forecast issue of every member, its issue time and error size (default 0)")
+
+
+def _grid_and_time_options(parser: argparse.ArgumentParser, *, hours: float, bbox: str) -> None:
+    """The options an analytic source shares: its length, step, grid and issue time (their defaults in the help)."""
+    parser.add_argument("--hours", type=float, help=f"forecast length in hours (default {hours:g})")
+    parser.add_argument("--step-h", type=float, help="time step in hours (default 1)")
+    parser.add_argument("--spacing-deg", type=float, help="grid spacing in degrees (default 0.005)")
+    parser.add_argument("--bbox", help=f"WEST,SOUTH,EAST,NORTH in degrees, points on the edges (default {bbox})")
+    parser.add_argument("--depths", help="layer depths in metres (default 0,5,10,15)")
+    parser.add_argument("--issue-time", help="ISO 8601 issue time, t = 0 (default 2026-01-15T00:00:00Z)")
 
 
 def run(args: argparse.Namespace) -> int:
