@@ -11,8 +11,6 @@
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -181,18 +179,20 @@ def test_a_time_varying_plan_needs_two_steps_and_the_physical_model(gyre_file):
         replace(PlanSettings(), time_varying=True)
 
 
-def test_lrauv_plan_time_varying_writes_the_slices(gyre_file, tmp_path):
+def test_lrauv_plan_time_varying_writes_the_slices(gyre_file, tmp_path, capsys):
+    from planner.cli import main
+
     out = tmp_path / "tv.lrpt"
-    cmd = [sys.executable, "-m", "planner.cli", "plan", "--forecast", str(gyre_file), "--model", "physical",
-           "--criterion", "expected", "--bbox", "-118.15,33.32,-117.85,33.45", "--nx", "9", "--ny", "5",
-           "--depths", "0,5", "--goal", "-117.9,33.4,0", "--time-varying", "--horizon-h", "2", "--out", str(out),
-           "--quiet"]
-    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    assert "x 3 time slices" in done.stdout and "slices     3 slices, 2026-01-15T00:00:00Z to 2026-01-15T02:00:00Z" in done.stdout
+    cmd = ["plan", "--forecast", str(gyre_file), "--model", "physical", "--criterion", "expected",
+           "--bbox", "-118.15,33.32,-117.85,33.45", "--nx", "9", "--ny", "5", "--depths", "0,5",
+           "--goal", "-117.9,33.4,0", "--time-varying", "--horizon-h", "2", "--out", str(out), "--quiet"]
+    assert main(cmd) == 0
+    printed = capsys.readouterr().out
+    assert "x 3 time slices" in printed and "slices     3 slices, 2026-01-15T00:00:00Z to 2026-01-15T02:00:00Z" in printed
     assert PolicyTable.load(out).n_slices == 3
-    bad = subprocess.run(cmd + ["--horizon-h", "0.2"], capture_output=True, text=True, timeout=600)
-    assert bad.returncode == 2 and "Traceback" not in bad.stderr and "two or more forecast steps" in bad.stderr
+    assert main(cmd + ["--horizon-h", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "two or more forecast steps" in err
 
 
 def test_slices_every_few_steps_or_a_clear_refusal(gyre_file):
