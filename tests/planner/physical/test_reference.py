@@ -22,8 +22,8 @@ from planner.physical.solve import solve_physical
 from tests.planner.physical.test_physical import goal_at, small_grid, swirl
 from tests.support.physical_reference import sample, value_iteration
 
-# Few samples, so the reference stays quick: 2 x 2 start points x (forecast + 3 members).
-SETTINGS = PhysicalSettings(start_points=2, error_members=3, current_error_m_s=0.05)
+# Few samples and RK4 steps, so the reference stays quick: 2 x 2 start points x (forecast + 3 members), 4 steps a crossing.
+SETTINGS = PhysicalSettings(start_points=2, error_members=3, current_error_m_s=0.05, rk4_steps=4)
 TOLERANCE_WH = 1e-9  # PhysicalSettings.tolerance_wh's default: actions within it of the best are ties
 
 
