@@ -412,7 +412,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
 
     t = time.perf_counter()
     times = np.array([forecast.time_s[n] - forecast.time_s[steps[0]] for n in steps], dtype=np.float64)
-    horizon = solve_horizon(model_at, times, request.goal, progress=lambda text: None)
+    horizon = solve_horizon(model_at, times, request.goal, progress=lambda text: _note(progress, text))
     timings["transitions_s"] = horizon.timings_s["transitions_s"]
     timings["plan_s"] = time.perf_counter() - t
     solution = horizon.first

@@ -18,8 +18,9 @@ from typing import Any
 from planner.contract.arguments import Subcommands, floats
 from planner.contract.errors import LrauvError, PlannerError
 
-# DoubleGyreSettings field (or check name) -> the option that sets it (the settings' errors name the field).
-GYRE_OPTIONS = {
+# An analytic source's settings field (or check name) -> the option that sets it (the settings' errors
+# name the field): those of _grid_and_time_options, then each source's own.
+_GRID_OPTIONS = {
     "bbox": "--bbox",
     "spacing_deg": "--spacing-deg",
     "depths_m": "--depths",
@@ -27,6 +28,9 @@ GYRE_OPTIONS = {
     "step_h": "--step-h",
     "hours, step_h": "--hours/--step-h",
     "issue_time": "--issue-time",
+}
+GYRE_OPTIONS = {
+    **_GRID_OPTIONS,
     "peak_speed_m_s": "--peak-speed-m-s",
     "eps": "--eps",
     "period_h": "--period-h",
@@ -34,13 +38,7 @@ GYRE_OPTIONS = {
 }
 # TidalSettings field (or check name, or with_forecast_error argument) -> the option that sets it.
 TIDAL_OPTIONS = {
-    "bbox": "--bbox",
-    "spacing_deg": "--spacing-deg",
-    "depths_m": "--depths",
-    "hours": "--hours",
-    "step_h": "--step-h",
-    "hours, step_h": "--hours/--step-h",
-    "issue_time": "--issue-time",
+    **_GRID_OPTIONS,
     "amplitude_m_s": "--amplitude-m-s",
     "period_h": "--period-h",
     "phase_rad": "--phase-rad",

@@ -94,6 +94,8 @@ def solve_horizon(model_at: Callable[[int], PhysicalModel], times_s: NDArray[np.
     action[T - 1] = last.action
     sweeps = [0] * T
     first = last
+    # The goal cells are the same in every slice (land does not move).
+    is_goal = np.broadcast_to(last.goal_cells.mask[None], (K, L, ny, nx)).ravel()
     for s in range(T - 2, -1, -1):
         t = time.perf_counter()
         model = model_at(s)
@@ -101,8 +103,6 @@ def solve_horizon(model_at: Callable[[int], PhysicalModel], times_s: NDArray[np.
         t = time.perf_counter()
         if model.n_states != n:
             raise PlannerError(f"time-varying plan: slice {s} has {model.n_states:,} states, the last {n:,}")
-        goal_states = last.goal_cells.mask  # the goal cells are the same in every slice (land does not move)
-        is_goal = np.broadcast_to(goal_states[None], (K, L, ny, nx)).ravel()
         ps = model.settings.physical
         order = np.argsort(value[s + 1], kind="stable")
         state_ptr = np.searchsorted(model.pair_state, np.arange(n + 1)).astype(np.int64)
