@@ -11,6 +11,7 @@ import math
 import signal
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -22,6 +23,7 @@ from planner.contract.table import PolicyTable, read_table_file
 
 if TYPE_CHECKING:  # at run time imported where used, as below
     from executive.goal_tables import MissionPlan
+    from executive.uploads import UploadQuota
     from planner.contract.mission import Mission
     from planner.contract.settings import OnArrival
 
@@ -36,7 +38,7 @@ def add_parser(sub: Subcommands) -> None:
                          " (default: the log's name + -state, beside the log)")
     ex.add_argument("--resume", type=Path, metavar="STATE_DIR",
                     help="go on after a crash: reload goals, tables and the active goal from this state directory,"
-                         " recover the killed run's log, and write a new one")
+                         " recover the killed run's log, and write a new one (both beside --log when given)")
     ex.add_argument("--mission", type=Path,
                     help="mission YAML: goals, vehicle figures, safety limits; enables onboard replanning")
     ex.add_argument("--gcs", metavar="ADDRESS",
@@ -58,6 +60,10 @@ def add_parser(sub: Subcommands) -> None:
     ex.add_argument("--signing-key-file", type=Path, metavar="KEY",
                     help="MAVLink 2 signing key (32 bytes, or 64 hex digits): uploads and commands must be signed with it"
                          " (default: the mission's signing section; docs/missions.md)")
+    ex.add_argument("--upload-max-files", type=int, default=16, metavar="N",
+                    help="storage quota of uploads: files held at once (default 16); more are refused")
+    ex.add_argument("--upload-max-mb", type=float, default=64.0, metavar="MB",
+                    help="storage quota of uploads: megabytes (MiB) held at once (default 64); more are refused")
     ex.add_argument("--quiet", action="store_true")
 
     log = sub.add_parser("log", help="MCAP log tools")
@@ -145,6 +151,7 @@ def _exec(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise ExecutiveError(f"--{name.replace('_', '-')}: expected a non-negative number; got {value}")
+    quota = _upload_quota(args.upload_max_files, args.upload_max_mb)
     log_path = args.log or Path("out") / time.strftime("exec-%Y%m%dT%H%M%SZ.mcap", time.gmtime())
     recovered = None
     if resumed is not None:
@@ -156,6 +163,7 @@ def _exec(args: argparse.Namespace) -> int:
         max_wall_s=args.max_wall_s, max_vehicle_s=None if args.max_vehicle_h is None else args.max_vehicle_h * 3600.0,
         gcs_link=args.gcs, mission_path=args.mission, watch_dir=watch, work_dir=args.work_dir,
         replan_on_new_forecast=replan_on_new, replan_period_s=period_s, signing=key, state_dir=state_dir,
+        upload_quota=quota,
     )
     table = plan.table
     assert table is not None
@@ -200,13 +208,19 @@ def _exec(args: argparse.Namespace) -> int:
         if executive.signature_refusals:
             print("signing    refused " + ", ".join(f"{n:,} {verdict.value}"
                                                      for verdict, n in executive.signature_refusals.items()))
-        print(f"log        {s.log_path}", flush=True)
+        dropped = executive.recorder.records_dropped
+        lost = f" ({dropped:,} records dropped: the disk failed or fell behind)" if dropped else ""
+        print(f"log        {s.log_path}{lost}", flush=True)
     return 0 if s.reached or not args.exit_on_arrival else 1
 
 
 def _resume_log(previous: Path | None, given: Path | None) -> tuple[Path, str | None]:
-    """The new log's path, and what became of the killed run's log (recovered up to its last record)."""
-    from executive.recorder import is_complete, recover
+    """The new log's path, and what became of the killed run's log (recovered up to its last record).
+
+    With ``--log`` both go where it points: the killed run's disk may be the full one. The
+    killed log is only read; a failure to recover it is noted, never a reason not to start.
+    """
+    from executive.recorder import LogError, is_complete, recover
 
     note = None
     if previous is not None and previous.exists():
@@ -215,17 +229,41 @@ def _resume_log(previous: Path | None, given: Path | None) -> tuple[Path, str | 
         if is_complete(previous):
             note = f"{previous} (complete)"
         else:
-            r = recover(previous)
-            last = "none" if r.last_log_time_s is None else f"{r.last_log_time_s:.1f} s"
-            note = (f"{previous}: {r.messages:,} messages up to vehicle time {last} recovered into {r.output}"
-                    f" (cut at byte {r.truncated_at_byte:,})")
+            out = None
+            if given is not None:  # beside the new log, not on the killed run's (maybe full) disk
+                stem = given.parent / f"{previous.stem}.recovered"
+                out = _unused(lambda n: stem.with_name(f"{stem.name}{'' if n == 1 else f'-{n}'}.mcap"))
+            try:
+                if out is not None:
+                    out.parent.mkdir(parents=True, exist_ok=True)
+                r = recover(previous, out)
+            except (LogError, OSError) as exc:
+                note = f"{previous}: not recovered ({exc}); recover it later with `lrauv log recover`"
+            else:
+                last = "none" if r.last_log_time_s is None else f"{r.last_log_time_s:.1f} s"
+                note = (f"{previous}: {r.messages:,} messages up to vehicle time {last} recovered into {r.output}"
+                        f" (cut at byte {r.truncated_at_byte:,})")
     if given is not None:
         return given, note
     base = previous if previous is not None else Path("out") / "exec.mcap"
+    return _unused(lambda n: base.with_name(f"{base.stem}-resumed-{n}.mcap")), note
+
+
+def _unused(name: Callable[[int], Path]) -> Path:
+    """``name(n)`` for the first n = 1, 2, ... that does not exist yet."""
     n = 1
-    while (path := base.with_name(f"{base.stem}-resumed-{n}.mcap")).exists():
+    while (path := name(n)).exists():
         n += 1
-    return path, note
+    return path
+
+
+def _upload_quota(max_files: int, max_mb: float) -> UploadQuota:
+    from executive.uploads import UploadQuota
+
+    if not (max_files > 0 and math.isfinite(max_mb) and max_mb > 0):
+        raise ExecutiveError(f"--upload-max-files {max_files} --upload-max-mb {max_mb}: expected a positive number"
+                             " of files and of megabytes")
+    return UploadQuota(max_files=max_files, max_bytes=max(1, round(max_mb * 1024 * 1024)))
 
 
 def _load_mission(mission_path: Path) -> Mission:

@@ -12,8 +12,8 @@ it is closed (TerminateSession, or ResetSessions as PX4 and QGroundControl close
 upload) the file goes to ``accept(path, data)``. None stores it in ``files`` (replacing
 an older file of that path) and the terminate is ACKed; a reason string discards it
 and the terminate is NAKed with Fail (the reason is logged; FTP has no field for it).
-An exception from ``accept`` refuses the file too. ``files`` holds the most recent
-accepted files: older ones are evicted to make room (see "Bounded memory" below).
+An exception from ``accept`` refuses the file too. ``files`` holds the accepted files,
+within a storage quota (see "Storage quota" below).
 ``accept`` must judge the content itself (a policy table's own checks): a GCS that
 aborts an upload with ResetSessions ("Uploading a File": on a NAK the GCS "should
 cancel ... by sending ResetSessions") hands it a partial file. Sessions with a refused
@@ -52,17 +52,24 @@ Choices where the spec leaves room:
   no final XOR, i.e. ``zlib.crc32(data, 0xFFFFFFFF) ^ 0xFFFFFFFF`` (not ``zlib.crc32``).
 * CreateDirectory answers FileExists for the fixed directories and FileProtected
   otherwise; RemoveDirectory, TruncateFile and Rename are not supported
-  (UnknownCommand), so stored files change only through ``accept``, RemoveFile and eviction.
-* Bounded memory: at most ``max_sessions`` open sessions (the oldest is dropped, without
-  ``accept``, to open another), files up to ``max_file_bytes`` (a WriteFile beyond
-  that is NAKed FailErrno EFBIG) and a bounded reply cache. One byte budget,
-  ``max_total_bytes``, covers the open uploads and the stored files together: when an
-  upload grows (WriteFile, or OpenFileWO copying a stored file) or an accepted file is
-  stored, the oldest stored files are evicted to make room, and storing a new path
-  beyond ``max_files`` evicts the oldest too. A WriteFile that open uploads alone would
-  take over the budget is NAKed FailErrno ENOSPC and poisons its session (an
-  OpenFileWO, with no session yet, is just NAKed). Evicting, removing or replacing a
-  file closes the read sessions on it, so no byte is held outside the budget.
+  (UnknownCommand), so stored files change only through ``accept``, RemoveFile and
+  ``discard`` (the executive removes superseded forecasts).
+* Storage quota: ``max_files`` files and ``max_total_bytes`` bytes, counting the stored
+  files and the open uploads together (an upload that replaces a stored file counts both
+  until it is stored). A write beyond the quota is refused, never made room for by
+  dropping another file: CreateFile/OpenFileWO of a new path when ``max_files`` are held
+  or open, or a WriteFile/OpenFileWO that would take the bytes over ``max_total_bytes``,
+  is NAKed FailErrno ENOSPC (a WriteFile also poisons its session), and ``announce`` is
+  told once until room is made (RemoveFile, ``discard``). Files are at most
+  ``max_file_bytes`` (beyond: FailErrno EFBIG). Also bounded: ``max_sessions`` open sessions
+  (the oldest is dropped, without ``accept``, to open another) and the reply cache.
+  Removing or replacing a file closes the read sessions on it.
+* No sparse files: a WriteFile beyond the current end is not zero-filled. Clients keep
+  several writes in flight ("Uploading a File"), so a lost datagram lets later blocks
+  arrive first: such a block is held (its own bytes count) until the gap is written, if it
+  starts at most ``MAX_GAP_BYTES`` beyond the end and at most ``MAX_HELD_BLOCKS`` are held;
+  a write further out is NAKed FailErrno EINVAL and poisons its session (so a 1-byte write
+  at a large offset makes no large file), and a session closed with a gap is refused.
 * CalcFileCRC32 is computed once per stored file, on the first request, and kept with it.
 
 Not thread-safe: call ``handle`` from one thread.
@@ -87,6 +94,8 @@ MAX_DATA = 239  # "Payload Format": data[] after the 12-byte header
 _HEADER = struct.Struct("<HBBBBBxI")
 DIRECTORIES = frozenset({"/", "/tables", "/forecasts"})  # policy tables (*.lrpt), forecasts (*.nc)
 _CACHE_ENTRIES = 64
+MAX_GAP_BYTES = 64 * 1024  # how far beyond a file's end a WriteFile may start (held until the gap is written)
+MAX_HELD_BLOCKS = 512  # out-of-order blocks held per upload
 
 
 class Opcode(IntEnum):
@@ -184,6 +193,23 @@ class _WriteSession:
     path: str
     data: bytearray = field(default_factory=bytearray)
     poisoned: bool = False  # a write was refused: closing discards without accept
+    held: dict[int, bytes] = field(default_factory=dict)  # blocks beyond the end, by offset, until the gap is written
+    new_file: bool = True  # its path is not a stored file: storing it takes one more of max_files
+
+    @property
+    def size(self) -> int:
+        """Bytes this upload holds: the file so far and the blocks held beyond its end."""
+        return len(self.data) + sum(map(len, self.held.values()))
+
+    def put(self, offset: int, block: bytes) -> None:
+        """Write ``block`` at ``offset`` (at most the end), then every held block the file now reaches."""
+        self.data[offset:offset + len(block)] = block
+        while self.held:
+            start = min(self.held)
+            if start > len(self.data):
+                return
+            held = self.held.pop(start)
+            self.data[start:start + len(held)] = held
 
 
 @dataclass(frozen=True)
@@ -221,12 +247,15 @@ class FtpServer:
     """The FTP state machine; ``files`` is a read-only view of the most recent accepted files, oldest first."""
 
     def __init__(self, *, accept: Callable[[str, bytes], str | None], max_file_bytes: int = 64 * 1024 * 1024,
-                 max_files: int = 64, max_sessions: int = 4, max_total_bytes: int = 128 * 1024 * 1024) -> None:
+                 max_files: int = 16, max_sessions: int = 4, max_total_bytes: int = 64 * 1024 * 1024,
+                 announce: Callable[[str], object] = lambda text: None) -> None:
         self._accept = accept
+        self._announce = announce
         self.max_file_bytes = max_file_bytes
         self.max_files = max_files
         self.max_sessions = max_sessions
         self.max_total_bytes = max_total_bytes
+        self._full_announced = False  # the quota's refusal is announced once until room is made
         self._files: dict[str, _Stored] = {}  # oldest first
         self._stored_bytes = 0
         self._sessions: OrderedDict[int, _WriteSession | _ReadSession] = OrderedDict()  # oldest first
@@ -315,6 +344,10 @@ class FtpServer:
         if session.poisoned:
             log.warning("FTP upload %s discarded: a write was refused", session.path)
             return False
+        if session.held:  # a block beyond a gap that was never written: the file is not whole
+            log.warning("FTP upload %s discarded: %d blocks beyond a gap at byte %d", session.path, len(session.held),
+                        len(session.data))
+            return False
         data, session.data = bytes(session.data), bytearray()  # the one copy; the buffer is freed
         try:
             reason = self._accept(session.path, data)
@@ -323,11 +356,7 @@ class FtpServer:
         if reason is not None:
             log.warning("FTP upload %s (%d bytes) refused: %s", session.path, len(data), reason)
             return False
-        if self._upload_bytes() + len(data) > self.max_total_bytes:  # only when max_total_bytes < max_file_bytes
-            log.warning("FTP upload %s (%d bytes) discarded: over max_total_bytes", session.path, len(data))
-            return False
         self._drop_file(session.path)  # the older version
-        self._make_room(len(data), files=1)
         self._files[session.path] = _Stored(data)
         self._stored_bytes += len(data)
         return True
@@ -359,29 +388,29 @@ class FtpServer:
             raise _Nak(ErrorCode.INVALID_SESSION)
         return session
 
-    # --- the byte budget ------------------------------------------------------------------------------
+    # --- the storage quota ----------------------------------------------------------------------------
 
-    def _make_room(self, extra_bytes: int, files: int = 0) -> bool:
-        """Evicts the oldest stored files until ``extra_bytes`` more fit in ``max_total_bytes`` (and
-        ``files`` more in ``max_files``); False when the open uploads alone leave no room."""
-        uploads = self._upload_bytes()
-        if uploads + extra_bytes > self.max_total_bytes:
-            return False
-        while self._files and (self._stored_bytes + uploads + extra_bytes > self.max_total_bytes
-                               or len(self._files) + files > self.max_files):
-            oldest = next(iter(self._files))
-            log.warning("FTP file %s (%d bytes) evicted to make room", oldest, len(self._files[oldest].data))
-            self._drop_file(oldest)
-        return True
-
-    def _upload_bytes(self) -> int:
-        return sum(len(s.data) for s in self._sessions.values() if isinstance(s, _WriteSession))
+    def _check_quota(self, path: str, *, extra_bytes: int = 0, new_file: bool = False) -> None:
+        """NAK FailErrno ENOSPC (announced once until room is made) when ``extra_bytes`` more, or
+        one more file, would go over the quota."""
+        uploads = [s for s in self._sessions.values() if isinstance(s, _WriteSession)]
+        used_bytes = self._stored_bytes + sum(s.size for s in uploads)
+        used_files = len(self._files) + sum(s.new_file for s in uploads)
+        if used_bytes + extra_bytes <= self.max_total_bytes and not (new_file and used_files >= self.max_files):
+            return
+        if not self._full_announced:
+            self._full_announced = True
+            self._announce(f"upload quota full: {path} refused; {used_files} files, {used_bytes / 1e6:.1f} MB held"
+                           f" (limits {self.max_files} files, {self.max_total_bytes / 1e6:.1f} MB):"
+                           " remove files with FTP RemoveFile")
+        raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
 
     def _drop_file(self, path: str) -> bool:
         """Forgets a stored file and closes the read sessions on it; False when there was none."""
         stored = self._files.pop(path, None)
         if stored is None:
             return False
+        self._full_announced = False  # room was made: a later refusal is news again
         self._stored_bytes -= len(stored.data)
         for sid in [sid for sid, s in self._sessions.items() if isinstance(s, _ReadSession) and s.path == path]:
             del self._sessions[sid]
@@ -401,31 +430,41 @@ class FtpServer:
     def _open_write(self, req: Frame, *, truncate: bool) -> _Ack:
         """"CreateFile" (O_CREAT | O_TRUNC) and "OpenFileWO" (O_CREAT, keeps the content)."""
         path = _file_path(req.data)
-        stored = None if truncate else self._files.get(path)
-        initial = b"" if stored is None else stored.data
+        stored = self._files.get(path)
+        initial = b"" if stored is None or truncate else stored.data
         for sid, open_session in list(self._sessions.items()):
             if isinstance(open_session, _WriteSession) and open_session.path == path:
                 del self._sessions[sid]  # an abandoned upload of the same path
                 log.warning("FTP session %d (%s) superseded by a new upload", sid, path)
-        if not self._make_room(len(initial)):
-            raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
-        self._open(_WriteSession(path, bytearray(initial)), req.session)
+        self._check_quota(path, extra_bytes=len(initial), new_file=stored is None)
+        self._open(_WriteSession(path, bytearray(initial), new_file=stored is None), req.session)
         return _Ack()
 
     def _write(self, req: Frame) -> _Ack:
-        """"WriteFile": any offset, gaps read as zeros; the ACK echoes the offset."""
+        """"WriteFile": at or before the end, or held a little beyond it (no sparse files); the ACK echoes the offset."""
         session = self._write_session(req)
         end = req.offset + len(req.data)
         if end > self.max_file_bytes:
             session.poisoned = True
             raise _Nak(ErrorCode.FAIL_ERRNO, errno.EFBIG)
-        buf = session.data
-        if not self._make_room(max(0, end - len(buf))):
+        size = len(session.data)
+        ahead = req.offset > size
+        if ahead and (req.offset - size > MAX_GAP_BYTES or len(session.held) >= MAX_HELD_BLOCKS):
+            if not session.poisoned:
+                self._announce(f"upload refused: {session.path}: a write at byte {req.offset}, beyond its end"
+                               f" ({size} bytes); no sparse files")
             session.poisoned = True
-            raise _Nak(ErrorCode.FAIL_ERRNO, errno.ENOSPC)
-        if len(buf) < req.offset:
-            buf.extend(bytes(req.offset - len(buf)))
-        buf[req.offset:end] = req.data
+            raise _Nak(ErrorCode.FAIL_ERRNO, errno.EINVAL)
+        grows = len(req.data) if ahead else max(0, end - size)
+        try:
+            self._check_quota(session.path, extra_bytes=grows)
+        except _Nak:
+            session.poisoned = True
+            raise
+        if ahead:
+            session.held[req.offset] = req.data
+        else:
+            session.put(req.offset, req.data)
         return _Ack()
 
     def _read(self, req: Frame) -> _Ack:
@@ -439,6 +478,10 @@ class FtpServer:
         """"BurstReadFile": one packet per request, ``burst_complete`` set."""
         ack = self._read(req)
         return _Ack(ack.data, burst_complete=1)
+
+    def discard(self, path: str) -> bool:
+        """Forget a stored file (the executive removes a superseded forecast); False when there was none."""
+        return self._drop_file(path)
 
     def _remove(self, req: Frame) -> _Ack:
         path = _path(req.data)

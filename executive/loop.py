@@ -34,7 +34,7 @@ from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
 from executive.replanner import ForecastWatcher, PlanJob, PlanResult, Replanner
 from executive.state import Command, Event, LogLevelName, Phase, VehicleState
-from executive.uploads import Uploads
+from executive.uploads import UploadQuota, Uploads
 from planner.contract.errors import LrauvError
 from planner.contract.table import PolicyTable
 
@@ -63,6 +63,7 @@ class ExecConfig:
     replan_period_s: float | None = None  # vehicle seconds between replans on the latest forecast
     signing: signing.SigningKey | None = None  # MAVLink 2 signing: required of uploads and commands, used on all we send
     state_dir: Path | None = None  # durable state for a restart (executive.durable): saved at start and every swap
+    upload_quota: UploadQuota = field(default_factory=UploadQuota)  # files and bytes uploads may hold (executive.uploads)
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,7 +120,8 @@ class Executive:
         self.clock = VehicleClock()
         self.vehicle = VehicleState()
         self.helm = HelmState()
-        self.recorder = Recorder(config.log_path, metadata=metadata or {})
+        # In the background (executive.log_writer): a full, slow or failing disk degrades the log, never control.
+        self.recorder = Recorder(config.log_path, metadata=metadata or {}, background=True)
         self._last_time: dict[str, float] = {}
         self._next_heartbeat_s = 0.0
         self._next_heartbeat_wall = 0.0
@@ -139,7 +141,10 @@ class Executive:
         self._work_dir = config.work_dir or config.log_path.with_name(config.log_path.stem + "-work")
         self.uploads = Uploads(accept_goals=self._accept_goals, accept_file=self._accept_file,
                                refused=lambda what, why: self._refuse(self.clock.now_s(time.monotonic()), what, why,
-                                                                      notify=False))
+                                                                      notify=False),
+                               quota=config.upload_quota, forecast_dir=self._work_dir / "forecasts",
+                               announce=lambda text: self._event(self.clock.now_s(time.monotonic()),
+                                                                 Event("warning", text)))
         self.replanner = Replanner(config.mission_path, self._work_dir) if config.mission_path is not None else None
         self.watcher = ForecastWatcher(config.watch_dir) if config.watch_dir is not None else None
         self._next_watch_wall = 0.0
@@ -521,10 +526,14 @@ class Executive:
     def _accept_forecast(self, now_s: float, name: str, data: bytes) -> str | None:
         if self.replanner is None:
             return self._refuse(now_s, name, "this executive has no mission to plan onboard (lrauv exec --mission)")
-        from planner.contract.atomic import write_atomic
-
-        path = write_atomic(self._work_dir / "forecasts" / name, data)
+        try:
+            path = self.uploads.forecasts.add(name, data)
+        except OSError as exc:  # a full disk refuses the upload (FTP NAK), never the loop
+            return self._refuse(now_s, name, f"cannot store it in {self._work_dir}: {exc.strerror or exc}")
         self._new_forecast(now_s, path, time.monotonic())
+        for old in self.uploads.prune_forecasts(keep={path, *self.replanner.forecasts},  # superseded ones go
+                                                plans=(self.plan, self._base(), self.staged)):
+            self._log(self.recorder.log, now_s, "info", f"superseded forecast {old.name} removed")
         return None
 
     def _new_forecast(self, now_s: float, path: Path, seen_wall: float) -> None:
@@ -652,7 +661,8 @@ class Executive:
             self._send_on(mav, now_s, msg)
         self._replanning(now_s, wall)
         self._write_later()
-        self.recorder.maybe_flush()
+        for event in self.recorder.maybe_flush():  # the log's own health: degraded, writing again
+            self._event(now_s, event)
         cfg = self.config
         if cfg.exit_on_arrival and self._arrival_s is not None and now_s - self._arrival_s >= cfg.linger_s:
             self._stop_reason = "arrived"

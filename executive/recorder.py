@@ -6,11 +6,12 @@ panel, ``foxglove.LocationFix``) and the events (Log panel, ``foxglove.Log``)
 without configuration. Log times are vehicle time since boot (``time_boot_ms``,
 as ``executive.clock`` extrapolates it); publish times are the wall clock.
 
-Crash safety: records go into small
-chunks and the loop calls ``maybe_flush`` every iteration, so a SIGKILL loses at
-most ``flush_interval_s`` of data. The killed file has no footer and the
-indexed reader refuses it; ``recover`` stream-reads every complete record and
-writes a new, indexed file, like the ``mcap recover`` CLI does.
+Crash safety: records go into small chunks and the loop calls ``maybe_flush`` every
+iteration, so a SIGKILL loses at most ``flush_interval_s`` of data (and, in the
+background, what the writer thread had not yet taken). The killed file has no footer and
+the indexed reader refuses it; ``recover`` stream-reads every complete record and
+writes a new, indexed file, like the ``mcap recover`` CLI does. A full or failing disk
+never leaves half a record in the file (``executive.log_writer.PendingFile``).
 
 Standard library and ``mcap`` only: the executive stays light.
 """
@@ -23,21 +24,22 @@ import json
 import math
 import os
 import struct
-import tempfile
+import threading
 import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from enum import Enum, IntEnum
 from pathlib import Path
-from typing import Any, BinaryIO, Literal, Self, get_args
+from typing import IO, Any, BinaryIO, Literal, Self, cast, get_args
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.data_stream import RecordBuilder
-from mcap.records import Attachment, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, Message, Metadata, Schema
+from mcap.records import Attachment, Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
+from executive.log_writer import Background, Flush, PendingFile, reason_of, spool_chunk_indexes
+from executive.state import Event
 from planner.contract.atomic import atomic_target
 from planner.contract.errors import ExecutiveError
 
@@ -326,40 +328,54 @@ def _foxglove_time(ns: int) -> dict[str, int]:
 
 
 class Recorder:
-    """Writes the executive's MCAP log; one instance per file, one thread.
+    """Writes the executive's MCAP log; one instance per file.
 
     The file is the final path from the start, so a killed process leaves a log
     that is readable up to its last flushed chunk (``recover``).
+
+    By default it writes in the caller's thread and a disk error is a ``LogError`` naming
+    the file. With ``background=True`` (the executive's loop) the caller only encodes and
+    queues; a writer thread writes and fsyncs, and a full, slow or failing disk degrades the
+    log instead (``executive.log_writer``: bounded queue, then records dropped and counted).
     """
 
     def __init__(self, path: str | os.PathLike[str], *, chunk_size: int = 64 * 1024, flush_interval_s: float = 1.0,
-                 profile: str = "lrauv", metadata: Mapping[str, Mapping[str, str]] | None = None) -> None:
+                 profile: str = "lrauv", metadata: Mapping[str, Mapping[str, str]] | None = None,
+                 background: bool = False, max_queued_records: int = 50_000, max_queued_bytes: int = 16 * 1024 * 1024,
+                 close_timeout_s: float = 5.0) -> None:
         if not (isinstance(chunk_size, int) and chunk_size > 0):
             raise LogError(f"chunk_size: expected a positive number of bytes; got {chunk_size!r}")
         if not (math.isfinite(flush_interval_s) and flush_interval_s >= 0):
             raise LogError(f"flush_interval_s: expected a non-negative number of seconds; got {flush_interval_s!r}")
         self.path = Path(path)
         try:
-            self._file: BinaryIO = open(self.path, "wb")  # noqa: SIM115 (closed in close())
+            self._file = PendingFile(self.path)
         except OSError as exc:
             raise LogError(f"{self.path}: cannot open the log for writing: {exc.strerror or exc}") from None
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION, index_types=_INDEXES,
+        self._writer = Writer(cast(IO[Any], self._file), chunk_size=chunk_size, compression=_COMPRESSION, index_types=_INDEXES,
                               use_statistics=True, use_summary_offsets=True, enable_crcs=True)
-        self._chunk_indexes = _spool_chunk_indexes(self._writer, self.path.parent)
+        self._chunk_indexes = spool_chunk_indexes(self._writer, self.path.parent)
         self._flush_interval_s = float(flush_interval_s)
+        self._close_timeout_s = float(close_timeout_s)
         self._channel_ids: dict[Topic, int] = {}
         self._schema_ids: dict[str, int] = {}
-        self._sequence: list[int] = [0]  # by channel id (ids start at 1)
+        self._sequence: dict[Topic, int] = {}  # the caller's: a dropped record leaves a gap, as MCAP means it
         self._messages = 0
         self._dirty = False
         self._closed = False
-        self._final_size: int | None = None
+        self._finished = False
         self._last_flush_wall_s = time.monotonic()
+        self._writer.start(profile, _LIBRARY)  # into memory: the file sees it at the first push
+        self._background: Background | None = None
         try:
-            self._writer.start(profile, _LIBRARY)
+            if background:
+                self._background = Background(self, max_records=max_queued_records, max_bytes=max_queued_bytes)
             for name, data in (metadata or {}).items():
                 self.metadata(name, data)
-            self._file.flush()  # the header is on disk: even an early kill leaves a recoverable file
+            if self._background is not None:
+                self._background.request(Flush(fsync=False))  # the header to the file: a killed run leaves a log
+            else:
+                self._disk("write", self.push)
         except BaseException:
             self._file.close()
             raise
@@ -379,9 +395,6 @@ class Recorder:
     def _write(self, topic: Topic, log_time_s: float, payload: Mapping[str, object], publish_ns: int) -> None:
         if self._closed:
             raise LogError(f"{self.path}: write to {topic.value} after close()")
-        channel_id = self._channel_ids.get(topic)
-        if channel_id is None:
-            channel_id = self._register(topic)
         try:
             data = _ENCODE(payload).encode()
         except (ValueError, TypeError):  # NaN/inf, or keys/values the fast path cannot take
@@ -393,12 +406,10 @@ class Recorder:
             log_ns = round(log_time_s * _NS_PER_S)
         except (ValueError, OverflowError, TypeError):
             raise LogError(f"{self.path}: {topic.value}: expected a finite log_time_s; got {log_time_s!r}") from None
-        log_ns = max(log_ns, 0)  # MCAP times are unsigned
-        seq = self._sequence[channel_id]
-        self._sequence[channel_id] = (seq + 1) & 0xFFFFFFFF
-        self._writer.add_message(channel_id, log_ns, data, publish_ns, seq)
-        self._messages += 1
+        seq = self._sequence.get(topic, 0)
+        self._sequence[topic] = (seq + 1) & 0xFFFFFFFF
         self._dirty = True
+        self._submit(("message", topic, max(log_ns, 0), data, publish_ns, seq), len(data))  # MCAP times are unsigned
 
     def location_fix(self, log_time_s: float, *, lat_deg: float, lon_deg: float, depth_m: float,
                      unix_time_s: float | None = None, frame_id: str = "vehicle") -> None:
@@ -433,48 +444,61 @@ class Recorder:
         bad = [k for k, v in data.items() if not (isinstance(k, str) and isinstance(v, str))]
         if bad:
             raise LogError(f"metadata {name!r}: keys and values must be strings; not so for {bad}")
-        self._writer.add_metadata(name, dict(data))
+        self._submit(("metadata", name, dict(data)), sum(len(k) + len(v) for k, v in data.items()))
 
     def attach(self, name: str, data: bytes, *, media_type: str = "application/octet-stream",
                log_time_s: float = 0.0) -> None:
         """An attachment (exact bytes), e.g. the uploaded policy table."""
         self._check_open(f"attachment {name!r}")
-        self._writer.add_attachment(time.time_ns(), _time_ns(log_time_s, "log_time_s"), name, media_type, bytes(data))
+        self._submit(("attachment", time.time_ns(), _time_ns(log_time_s, "log_time_s"), name, media_type,
+                      bytes(data)), len(data))
 
     # -- durability ---------------------------------------------------------------------------
 
     def flush(self, *, fsync: bool = False) -> None:
-        """Close the open chunk and hand everything to the OS (survives SIGKILL); fsync survives power loss."""
+        """Close the open chunk and hand everything to the OS (survives SIGKILL); fsync survives power loss.
+
+        In the background, waits for the writer at most ``close_timeout_s`` (not on a failing disk).
+        """
         self._check_open("flush")
-        self._writer.flush()
-        if fsync:
-            os.fsync(self._file.fileno())
         self._dirty = False
         self._last_flush_wall_s = time.monotonic()
-
-    def maybe_flush(self, now_wall_s: float | None = None) -> None:
-        """``flush()`` when ``flush_interval_s`` of wall time (``time.monotonic``) has passed; cheap otherwise."""
-        now = time.monotonic() if now_wall_s is None else now_wall_s
-        if now - self._last_flush_wall_s < self._flush_interval_s or self._closed:
+        if self._background is None:
+            self._disk("flush", self.flush_chunk, fsync=fsync)
             return
-        if self._dirty:
-            self.flush()
-        self._last_flush_wall_s = now
+        done = threading.Event()
+        self._background.request(Flush(fsync, done))
+        done.wait(self._close_timeout_s)
+
+    def maybe_flush(self, now_wall_s: float | None = None) -> list[Event]:
+        """``flush()`` when ``flush_interval_s`` of wall time (``time.monotonic``) has passed; cheap otherwise.
+
+        In the background only asked for; returns the log's notices since the last call (degraded, writing again).
+        """
+        now = time.monotonic() if now_wall_s is None else now_wall_s
+        if self._closed:
+            return []
+        if now - self._last_flush_wall_s >= self._flush_interval_s:
+            if self._dirty and self._background is not None:
+                self._background.request(Flush(fsync=False))
+                self._dirty = False
+            elif self._dirty:
+                self.flush()
+            self._last_flush_wall_s = now
+        return [] if self._background is None else self._background.notices()
 
     def close(self) -> None:
-        """Write the summary and footer, fsync and close; a second call does nothing."""
+        """Write the summary and footer, fsync and close; a second call does nothing.
+
+        In the background, waits at most ``close_timeout_s``: a dead disk leaves the log without its footer.
+        """
         if self._closed:
             return
         self._closed = True
-        try:
-            self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
-        finally:
-            self._final_size = os.fstat(self._file.fileno()).st_size
-            self._file.close()
-            if self._chunk_indexes is not None:
-                self._chunk_indexes.close()
+        if self._background is not None:
+            self._background.close(self._close_timeout_s)
+        else:
+            self._disk("finish the log", self.finish)
 
     def __enter__(self) -> Self:
         return self
@@ -484,14 +508,76 @@ class Recorder:
 
     @property
     def messages_written(self) -> int:
-        return self._messages
+        return self._messages  # handed to the MCAP writer (in the background: by the writer thread)
+
+    @property
+    def records_dropped(self) -> int:
+        """Records the background writer dropped because the disk failed or fell behind."""
+        return 0 if self._background is None else self._background.dropped
+
+    @property
+    def degraded(self) -> str | None:
+        """Why the log is degraded now (a full disk, say); None while it is written."""
+        return None if self._background is None else self._background.degraded
 
     @property
     def bytes_written(self) -> int:
-        """File size so far (flushed chunks and buffered records; not the open chunk)."""
-        return self._final_size if self._final_size is not None else self._file.tell()
+        """Log size so far (flushed chunks and buffered records; not the open chunk)."""
+        return self._file.tell()
+
+    # -- the writer's side (the caller's thread, or the background writer's) -----------------------
+
+    def apply(self, op: tuple[Any, ...]) -> None:
+        """One queued record into the MCAP writer (memory; ``push`` writes it out)."""
+        kind = op[0]
+        if kind == "message":
+            _, topic, log_ns, data, publish_ns, seq = op
+            channel_id = self._channel_ids.get(topic)
+            if channel_id is None:
+                channel_id = self._register(topic)
+            self._writer.add_message(channel_id, log_ns, data, publish_ns, seq)
+            self._messages += 1
+        elif kind == "metadata":
+            self._writer.add_metadata(op[1], op[2])
+        else:
+            self._writer.add_attachment(*op[1:])
+
+    def push(self) -> None:
+        self._file.push()
+
+    def flush_chunk(self, *, fsync: bool) -> None:
+        self._writer.flush()
+        self._file.push()
+        if fsync:
+            self._file.sync()
+
+    def finish(self) -> None:
+        try:
+            if not self._finished:
+                self._finished = True
+                self._writer.finish()
+            self._file.push()
+            self._file.sync()
+        finally:
+            self._file.close()
+            if self._chunk_indexes is not None:
+                self._chunk_indexes.close()
 
     # -- internals ------------------------------------------------------------------------------
+
+    def _submit(self, op: tuple[Any, ...], nbytes: int) -> None:
+        if self._background is not None:
+            self._background.put(op, nbytes)
+            return
+        self.apply(op)
+        self._disk("write", self.push)
+
+    def _disk(self, what: str, fn: Any, **kwargs: Any) -> None:
+        """``fn`` in the caller's thread; a disk error is a ``LogError`` that names the file."""
+        try:
+            fn(**kwargs)
+        except OSError as exc:
+            raise LogError(f"{self.path}: cannot {what}: {reason_of(exc)}") from None
 
     def _check_open(self, what: str) -> None:
         if self._closed:
@@ -507,64 +593,10 @@ class Recorder:
             self._schema_ids[name] = schema_id
         channel_id = self._writer.register_channel(topic.value, "json", schema_id, {})
         self._channel_ids[topic] = channel_id
-        self._sequence.extend([0] * (channel_id + 1 - len(self._sequence)))
         return channel_id
 
 
 _NO_COVARIANCE = (0.0,) * 9
-
-
-class _SpooledChunkIndexes:
-    """The writer's chunk indexes, kept in an unlinked temporary file instead of in memory.
-
-    ``mcap.Writer`` keeps one ``ChunkIndex`` per chunk until ``finish`` writes them into the
-    summary. The loop flushes a chunk every second of wall time, so at sea (1x) that is 86,400
-    indexes a vehicle day, several kB each in Python objects: the soak (bench/bench_soak.py)
-    saw the executive grow 5 MB a day at 1000x. Here each index is its record's bytes on disk,
-    read back once at ``finish``; memory stays flat however long the mission.
-    """
-
-    def __init__(self, directory: Path) -> None:
-        self._file = tempfile.TemporaryFile(dir=directory)  # unlinked: a killed process leaves nothing
-        self.count = 0
-
-    def append(self, index: ChunkIndex) -> None:
-        builder = RecordBuilder()
-        index.write(builder)
-        self._file.write(builder.end())
-        self.count += 1
-
-    def __len__(self) -> int:
-        return self.count
-
-    def __iter__(self) -> Iterator[_RawRecord]:
-        self._file.flush()
-        self._file.seek(0)
-        while header := self._file.read(9):
-            _opcode, length = struct.unpack("<BQ", header)
-            yield _RawRecord(header + self._file.read(length))
-        self._file.seek(0, os.SEEK_END)
-
-    def close(self) -> None:
-        self._file.close()
-
-
-@dataclass(frozen=True, slots=True)
-class _RawRecord:
-    data: bytes
-
-    def write(self, builder: RecordBuilder) -> None:
-        builder.write(self.data)
-
-
-def _spool_chunk_indexes(writer: Writer, directory: Path) -> _SpooledChunkIndexes | None:
-    """Put a spool in place of the writer's in-memory list (mcap 1.x keeps it in ``__chunk_indices``)."""
-    name = "_Writer__chunk_indices"
-    if not isinstance(getattr(writer, name, None), list):
-        return None  # another mcap version: the indexes stay in memory, the log is the same
-    spool = _SpooledChunkIndexes(directory)
-    setattr(writer, name, spool)
-    return spool
 
 
 # -- reading -----------------------------------------------------------------------------

@@ -108,6 +108,11 @@ class Replanner:
     def busy(self) -> bool:
         return self._proc is not None or self._waiting is not None
 
+    @property
+    def forecasts(self) -> frozenset[Path]:
+        """The forecast files of the job running and the one waiting: not to be removed under them."""
+        return frozenset(j.forecast for j in (self._job, self._waiting) if j is not None and j.forecast is not None)
+
     def request(self, job: PlanJob) -> None:
         self._waiting = job
         if self._proc is None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import signal
+import socket
 import subprocess
 import time
 from pathlib import Path
@@ -88,3 +89,58 @@ def test_a_killed_executive_leaves_a_log_that_log_recover_repairs(demo_plan, tab
     assert {d["action"] for d in decisions} & {"FORWARD", "DRIFT", "ROTATE_LEFT", "ROTATE_RIGHT", "UP", "DOWN"}
     policy = [p for _, _, p in read_messages(recovered, ["/executive/policy"])]
     assert policy and policy[0]["table_crc32"] == f"{demo_plan.table.crc32:08x}"
+
+
+def _killed_run(demo_plan, tmp_path: Path, log: Path) -> Path:  # type: ignore[no-untyped-def]
+    """A state directory as a killed executive left it, naming ``log``; returns the directory."""
+    from executive import durable, goal_tables
+
+    state = tmp_path / "state"
+    durable.save(state, goal_tables.single(demo_plan.table, on_arrival="hold"), {}, log_path=log, mission_path=None)
+    return state
+
+
+def _resume(state: Path, new_log: Path) -> subprocess.CompletedProcess[str]:
+    silent = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # an autopilot that says nothing
+    silent.bind(("127.0.0.1", 0))
+    try:
+        return _lrauv("exec", "--resume", str(state), "--log", str(new_log), "--max-wall-s", "0.3",
+                      "--link", f"udpout:127.0.0.1:{silent.getsockname()[1]}")
+    finally:
+        silent.close()
+
+
+def test_resume_recovers_the_killed_log_where_log_points_not_on_the_old_disk(demo_plan, tmp_path):
+    from executive.recorder import Recorder, Topic
+
+    old_disk = tmp_path / "full-disk"
+    old_disk.mkdir()
+    killed = old_disk / "run.mcap"
+    with Recorder(killed, chunk_size=512) as rec:
+        for i in range(40):
+            rec.write(Topic.STATE, float(i), {"time_s": float(i)})
+    killed.write_bytes(killed.read_bytes()[:-300])  # no footer: the process was killed
+    before = sorted(p.name for p in old_disk.iterdir())
+    new_log = tmp_path / "elsewhere" / "resumed.mcap"
+    proc = _resume(_killed_run(demo_plan, tmp_path, killed), new_log)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert sorted(p.name for p in old_disk.iterdir()) == before  # nothing written on the killed run's disk
+    recovered = tmp_path / "elsewhere" / "run.recovered.mcap"
+    assert f"recovered into {recovered}" in proc.stdout
+    assert 0 < len(list(read_messages(recovered))) <= 40  # up to its last complete record
+    assert list(read_messages(new_log))  # the resumed run's own log, finished
+
+
+def test_resume_starts_even_when_the_killed_log_cannot_be_recovered(demo_plan, tmp_path):
+    unreadable = tmp_path / "run.mcap"
+    unreadable.mkdir()  # EISDIR on open: as unreadable as a log on a failed disk
+    new_log = tmp_path / "resumed.mcap"
+    proc = _resume(_killed_run(demo_plan, tmp_path, unreadable), new_log)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"{unreadable}: not recovered" in proc.stdout and "lrauv log recover" in proc.stdout
+    assert list(read_messages(new_log))
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--upload-max-files", "0"), ("--upload-max-mb", "nan")])
+def test_exec_refuses_a_bad_upload_quota(table_path, flag, value):
+    _one_line_error(_lrauv("exec", "--table", str(table_path), flag, value), flag)
