@@ -22,6 +22,7 @@ from planner.forecast import (
     ensemble_size,
     file_identity,
     forecast_times,
+    lon_shifts,
     nearest_time_index,
     open_forecast,
 )
@@ -120,20 +121,34 @@ class SampleCache:
 
 
 def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
-    """The request's grid, or the forecast's own regular grid when no bbox is given (spec section 1)."""
+    """The request's grid, or the forecast's own regular grid when no bbox is given (spec section 1).
+
+    Either way in the vehicle's longitudes (``vehicle_longitudes``): a table is looked up with
+    the positions MAVLink reports, -180..180.
+    """
     if request.bbox is not None:
         if request.nx is None or request.ny is None:
             raise GridError("grid: a bbox needs --nx and --ny")
-        return Grid.from_bbox(request.bbox, nx=request.nx, ny=request.ny, depths_m=list(request.depths_m))
+        return Grid.from_bbox(vehicle_longitudes(request.bbox), nx=request.nx, ny=request.ny,
+                              depths_m=list(request.depths_m))
     lon, lat = forecast.lon_deg, forecast.lat_deg
     if lon.ndim != 1:
         raise GridError(
             f"{forecast.source}: the forecast grid is curvilinear; give --bbox WEST,SOUTH,EAST,NORTH with --nx and --ny"
         )
-    bbox = BBox(west_deg=float(lon[0]), south_deg=float(lat[0]), east_deg=float(lon[-1]), north_deg=float(lat[-1]))
+    bbox = vehicle_longitudes(
+        BBox(west_deg=float(lon[0]), south_deg=float(lat[0]), east_deg=float(lon[-1]), north_deg=float(lat[-1])))
     return Grid.from_bbox(
         bbox, nx=request.nx or lon.size, ny=request.ny or lat.size, depths_m=list(request.depths_m)
     )
+
+
+def vehicle_longitudes(bbox: BBox) -> BBox:
+    """``bbox`` on -180..180: a box wholly east of 180 deg (0..360 longitudes, as HYCOM's regional files
+    use) is turned by -360 deg, exactly (Sterbenz); any other box is kept as given."""
+    if bbox.west_deg < 180.0 or bbox.east_deg > 540.0:
+        return bbox
+    return replace(bbox, west_deg=bbox.west_deg - 360.0, east_deg=bbox.east_deg - 360.0)
 
 
 def native_spacing_deg(forecast: Forecast) -> float | None:
@@ -145,10 +160,16 @@ def native_spacing_deg(forecast: Forecast) -> float | None:
 
 
 def check_coverage(forecast: Forecast, grid: Grid) -> None:
-    """Refuse a bbox that lies wholly outside the forecast's longitude/latitude range."""
+    """Refuse a bbox that lies wholly outside the forecast's longitude/latitude range.
+
+    Longitudes compare modulo 360 deg, as resampling reads them (``planner.forecast.resample``): a
+    box in -180..180 covers a file on 0..360 (HYCOM's regional files) where it does after a whole turn.
+    """
     lon, lat = forecast.lon_deg, forecast.lat_deg
     b = grid.bbox
-    if b.east_deg < np.nanmin(lon) or b.west_deg > np.nanmax(lon) or b.north_deg < np.nanmin(lat) or b.south_deg > np.nanmax(lat):
+    lon_lo, lon_hi = float(np.nanmin(lon)), float(np.nanmax(lon))
+    if (not lon_shifts(b.west_deg, b.east_deg, lon_lo, lon_hi)
+            or b.north_deg < np.nanmin(lat) or b.south_deg > np.nanmax(lat)):
         raise GridError(
             f"bbox {b.west_deg:g},{b.south_deg:g},{b.east_deg:g},{b.north_deg:g} lies outside the forecast "
             f"{forecast.source}, which covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, "
@@ -276,6 +297,8 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     """
     timings: dict[str, float] = {}
     t = time.perf_counter()
+    if request.goal.lon_deg > 180.0:  # given on 0..360: the grid is on -180..180 (planning_grid)
+        request = replace(request, goal=replace(request.goal, lon_deg=request.goal.lon_deg - 360.0))
     refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
     if len(refs) > 1:
         return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)

@@ -15,7 +15,14 @@ for projected grids).
 from planner.forecast.describe import describe
 from planner.forecast.files import file_identity
 from planner.forecast.lazy import MAX_AXIS_POINTS, MAX_VALUES_PER_VARIABLE
-from planner.forecast.model import Forecast, ForecastTimes, ForecastWindow, is_periodic_lon, nearest_time_index
+from planner.forecast.model import (
+    Forecast,
+    ForecastTimes,
+    ForecastWindow,
+    is_periodic_lon,
+    lon_shifts,
+    nearest_time_index,
+)
 from planner.forecast.reader import ensemble_size, forecast_times, open_forecast
 from planner.forecast.regular import WINDOW_MARGIN_NODES
 
@@ -31,6 +38,7 @@ __all__ = [
     "file_identity",
     "forecast_times",
     "is_periodic_lon",
+    "lon_shifts",
     "nearest_time_index",
     "open_forecast",
 ]

@@ -332,6 +332,12 @@ def iso_time(forecast: Forecast | ForecastTimes, t_s: float) -> str:
     return str((origin + np.timedelta64(int(round(t_s * 1000)), "ms")).astype("datetime64[s]")) + "Z"
 
 
+def lon_shifts(west_deg: float, east_deg: float, lo_deg: float, hi_deg: float) -> range:
+    """The whole turns k for which ``[west, east] + 360 k`` overlaps ``[lo, hi]``: where a box given in one
+    longitude convention (-180..180 or 0..360) meets a file in the other. Empty when they never meet."""
+    return range(int(np.ceil((lo_deg - east_deg) / 360.0)), int(np.floor((hi_deg - west_deg) / 360.0)) + 1)
+
+
 def is_periodic_lon(lon: NDArray[np.float64]) -> bool:
     """A regular longitude axis that closes the circle (its last step back to the first is one spacing)."""
     if lon.size < 3:

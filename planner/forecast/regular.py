@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from planner.contract.errors import ForecastError
 from planner.forecast.cf import axis_variable, numbers
 from planner.forecast.layout import Components
-from planner.forecast.model import MAX_ABS_LON_DEG, is_periodic_lon
+from planner.forecast.model import MAX_ABS_LON_DEG, is_periodic_lon, lon_shifts
 from planner.forecast.request import Context, Fields, Want
 from planner.forecast.structured import StructuredHeader, read_velocities
 
@@ -180,7 +180,7 @@ def _regular_window(
     if east - west >= 360.0:
         brackets.append((0, axis.size - 1))
     else:
-        for k in range(int(np.ceil((lo - east) / 360.0)), int(np.floor((hi - west) / 360.0)) + 1):
+        for k in lon_shifts(west, east, lo, hi):
             p, q = max(west + 360.0 * k, lo), min(east + 360.0 * k, hi)
             if p <= q:
                 brackets.append(_bracket(axis, p, q))

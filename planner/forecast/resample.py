@@ -224,6 +224,13 @@ def _resample_regular(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[n
     file_lon_axis = _lon_axis(file_lon)
     tol = _axis_snap_tol(file_lon_axis)
     tx = _shift_lon(grid.lon_deg, file_lon_axis[0] - tol, file_lon_axis[-1] + tol)
+    turns = np.unique(np.round((tx - grid.lon_deg) / 360.0))
+    if turns.size == 1 and turns[0] != 0:
+        # Every target is a whole turn off (a box in -180..180 on a file on 0..360): turn the file's axes
+        # instead, exactly (x - 360 is exact for x in 180..720, Sterbenz), so the weights are bit for bit
+        # those of the same field on -180..180 and the plan is the same.
+        lon_axis, file_lon_axis = lon_axis - 360.0 * turns[0], file_lon_axis - 360.0 * turns[0]
+        tol, tx = _axis_snap_tol(file_lon_axis), grid.lon_deg
     ax = _axis_weights(lon_axis, tx, below="land", tol=tol)
     ay = _axis_weights(lat_src, grid.lat_deg, below="land", tol=_axis_snap_tol(file_lat))
     ix0, ix1 = ax.i0 % n_x, ax.i1 % n_x
