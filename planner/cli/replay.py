@@ -42,6 +42,24 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Exit status 0; 1 when the audit found a difference; a log that cannot be replayed raises ``LrauvError`` (2).
+
+    Whatever a broken log makes go wrong ends as one line naming it, never a traceback:
+    status 1 means only that the decisions differ.
+    """
+    try:
+        return _replay(args)
+    except (LrauvError, OSError, KeyboardInterrupt):  # ``planner.cli.main`` gives each its line and status
+        raise
+    except MemoryError:
+        raise LrauvError(f"{args.log}: ran out of memory replaying it") from None
+    except Exception as exc:  # noqa: BLE001 - a log this version cannot make sense of, however it fails
+        raise LrauvError(f"{args.log}: cannot replay it: {type(exc).__name__}: {exc} (a damaged log, or one"
+                         " written by another version)") from None
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from executive.recorder import LogError
     from planner.shore.replay.audit import audit, logged_tables, summary_line
     from planner.shore.replay.dive import load_dive
     from planner.shore.replay.divelog import open_dive
@@ -62,7 +80,10 @@ def run(args: argparse.Namespace) -> int:
     print(text, flush=True)
     status = 0
     if not args.no_audit:
-        result = audit(log)
+        try:
+            result = audit(log)
+        except LogError as exc:  # some of the audit's say what is wrong, not in which file
+            raise exc if str(log.path) in str(exc) else LogError(f"{log.path}: {exc}") from None
         print(summary_line(result))
         for m in result.mismatches[:_MAX_LISTED]:
             print(f"  {m.describe()}")
@@ -80,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"replay     {time.perf_counter() - t0:.1f} s", flush=True)
     if args.mavlink is not None:
         _restream(log, args.mavlink, args.speed)
+    if log.damage():  # what could be read was; the gap makes it a broken log, not an audit verdict
+        raise LrauvError(f"{log.path}: {log.damage()}")
     return status
 
 
@@ -104,8 +127,11 @@ def _plans(dive: Any, tables: dict[str, Any], forecast: Path | None) -> tuple[di
                 notes.append(str(exc))
                 plans[seg.table_crc32] = None
         plan = plans[seg.table_crc32]
-        if plan is not None:
-            layer, row, col, heading = (int(x) for x in cells[valid][0])  # the track's cells are (n, 4)
+        layer, row, col, heading = (int(x) for x in cells[valid][0])  # the track's cells are (n, 4)
+        shape = (table.n_layers, table.ny, table.nx, table.actions.shape[-1])
+        if not all(0 <= c < n for c, n in zip((layer, row, col, heading), shape, strict=True)):
+            notes.append(f"the logged cell {(layer, row, col, heading)} is outside table {seg.table_crc32} {shape}")
+        elif plan is not None:
             nominal[index] = nominal_from(plan, (layer, row, col, heading))
     note = "; ".join(dict.fromkeys(notes)) or None
     return {k: v for k, v in plans.items() if v is not None}, nominal, note

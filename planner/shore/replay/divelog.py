@@ -1,14 +1,17 @@
 """A dive's MCAP log opened for replay: what it holds, and its messages in the order they were written.
 
 The executive writes one log per run (``executive.recorder``). Replay reads it
-record by record (``recorder.RecordStream``) rather than through the index, so a
-log left by a killed writer replays up to its last complete record, and
-``DiveLog`` says where it ends. Messages come in file order, which is the order
+record by record (``planner.shore.replay.records``, within a memory budget)
+rather than through the index, so a log left by a killed writer replays up to its
+last complete record, and ``DiveLog`` says where it ends. Each payload is checked
+against its topic's schema as it is read (``planner.shore.replay.payloads``): a
+wrong type or a missing key is a ``LogError`` naming the file, the message and
+the key, never a crash further on. Messages come in file order, which is the order
 the executive did things in (log times are vehicle time and may step back at a
 reboot). Channels this version does not know are counted and skipped, never
 guessed at.
 
-Standard library and ``mcap`` only, like the recorder.
+Standard library, ``mcap`` and the executive's own modules, like the recorder.
 """
 
 from __future__ import annotations
@@ -22,7 +25,10 @@ from typing import Any, BinaryIO
 
 from mcap.records import Attachment, Channel, Header, Message, Metadata
 
-from executive.recorder import LogError, RecordStream, Topic, check_head
+from executive.helm import HelmConfig
+from executive.recorder import LogError, Topic, check_head, is_complete
+from planner.shore.replay.payloads import PayloadError, check_fields, check_payload
+from planner.shore.replay.records import BoundedRecords
 
 __all__ = ["DiveLog", "LogMessage", "open_dive"]
 
@@ -50,7 +56,8 @@ class DiveLog:
     profile: str
     complete: bool  # ended with a footer: the writer closed it
     end_byte: int  # end of the last complete record (== size_bytes when complete)
-    chunks_dropped: int  # chunks whose CRC or compression was broken
+    damaged_chunks: tuple[int, ...]  # where each chunk starts whose CRC, compression or records were broken
+    unreadable_inside: bool  # reading stopped at end_byte, yet the file ends with its footer: damage, not a cut
     counts: Mapping[Topic, int]  # messages per known topic
     unknown: Mapping[str, int]  # messages on topics (or encodings) this version does not read
     first_log_time_s: float | None
@@ -63,19 +70,36 @@ class DiveLog:
         return sum(self.counts.values())
 
     def where_it_ends(self) -> str:
-        """One line for the operator: complete, or where the cut is."""
+        """One line for the operator: complete, or where the cut is; and any damaged chunk."""
         if self.complete:
-            return f"complete ({self.size_bytes:,} bytes)"
-        last = "no messages" if self.last_log_time_s is None else f"vehicle time {self.last_log_time_s:.1f} s"
-        return (f"TRUNCATED: the writer did not finish (killed?); read up to byte {self.end_byte:,} of"
-                f" {self.size_bytes:,}, the last complete message at {last}")
+            text = f"complete ({self.size_bytes:,} bytes)"
+        elif self.unreadable_inside:
+            text = f"read up to byte {self.end_byte:,} of {self.size_bytes:,}"
+        else:
+            last = "no messages" if self.last_log_time_s is None else f"vehicle time {self.last_log_time_s:.1f} s"
+            text = (f"TRUNCATED: the writer did not finish (killed?); read up to byte {self.end_byte:,} of"
+                    f" {self.size_bytes:,}, the last complete message at {last}")
+        damage = self.damage()
+        return text + (f"; {damage}" if damage else "")
 
-    def messages(self, topics: Iterable[Topic] | None = None, *,
-                 containing: Mapping[Topic, bytes] | None = None) -> Iterator[LogMessage]:
-        """The messages on ``topics`` (default all known ones), in file order.
+    def damage(self) -> str:
+        """What of the file could not be read though it is there, for the operator (empty when nothing)."""
+        parts = []
+        if self.damaged_chunks:
+            at = ", ".join(f"{b:,}" for b in self.damaged_chunks[:5]) + (", ..." if len(self.damaged_chunks) > 5 else "")
+            parts.append(f"{len(self.damaged_chunks)} chunk(s) failed their CRC or decompression (at byte {at})")
+        if self.unreadable_inside:
+            parts.append(f"the record at byte {self.end_byte:,} is unreadable though the file goes on to its footer")
+        return "" if not parts else f"DAMAGED: {'; '.join(parts)}; what could not be read is missing from this replay"
+
+    def messages(self, topics: Iterable[Topic] | None = None, *, containing: Mapping[Topic, bytes] | None = None,
+                 keep_undecodable: bool = False) -> Iterator[LogMessage]:
+        """The messages on ``topics`` (default all known ones), in file order, each checked (``payloads``).
 
         ``containing`` keeps, on the topics it names, only messages whose JSON holds
         those bytes (e.g. ``b'"name":"SYSTEM_TIME"'``): a cheap filter before decoding.
+        ``keep_undecodable``: MAVLink records whose fields do not fit the dialect come as logged
+        (for the re-stream, which skips them by name) instead of raising ``LogError``.
         """
         wanted = set(Topic) if topics is None else set(topics)
         filters = containing or {}
@@ -86,17 +110,24 @@ class DiveLog:
             needle = filters.get(topic)
             if needle is not None and needle not in message.data:
                 continue
+            t = message.log_time / _NS_PER_S
+            where = f"{self.path}: {channel.topic} message {message.sequence} (log time {t:.3f} s)"
             try:
-                payload = json.loads(message.data)
+                payload = check_payload(topic, json.loads(message.data), keep_undecodable=keep_undecodable)
+            except RecursionError:
+                raise LogError(f"{where}: JSON nested too deeply to read") from None
+            except PayloadError as exc:
+                raise LogError(f"{where}: {exc}") from None
             except ValueError as exc:
-                raise LogError(f"{self.path}: {channel.topic}: message {message.sequence} is not JSON ({exc})") from None
-            yield LogMessage(topic, message.log_time / _NS_PER_S, message.publish_time / _NS_PER_S, payload)
+                raise LogError(f"{where}: not JSON ({exc})") from None
+            yield LogMessage(topic, t, message.publish_time / _NS_PER_S, payload)
 
 
 def open_dive(path: str | os.PathLike[str]) -> DiveLog:
     """Read ``path`` once through: header, channels, counts, metadata, attachments, where it ends.
 
-    Raises ``LogError`` for a file that is missing, not MCAP, or has no lrauv channel.
+    Raises ``LogError`` for a file that is missing, not MCAP, has no lrauv channel, holds
+    a chunk over the memory budget, or helm metadata that is not what the executive writes.
     """
     p = Path(path)
     counts: dict[Topic, int] = {}
@@ -108,7 +139,7 @@ def open_dive(path: str | os.PathLike[str]) -> DiveLog:
     first = last = None
     with _open(p) as f:
         size = os.fstat(f.fileno()).st_size
-        stream = RecordStream(f, size)
+        stream = BoundedRecords(f, size, p)
         for r in stream:
             if isinstance(r, Header):
                 header = r
@@ -137,8 +168,10 @@ def open_dive(path: str | os.PathLike[str]) -> DiveLog:
         seen = ", ".join(f"{name} ({n})" for name, n in unknown.items()) or "none"
         raise LogError(f"{p}: no lrauv executive channel in this MCAP file (library {header.library!r});"
                        f" expected topics like {Topic.DECISION.value}; channels seen: {seen}")
+    _check_helm(p, metadata.get("helm"))
     return DiveLog(path=p, size_bytes=size, library=header.library, profile=header.profile, complete=stream.complete,
-                   end_byte=size if stream.complete else stream.end_byte, chunks_dropped=stream.chunks_dropped,
+                   end_byte=size if stream.complete else stream.end_byte, damaged_chunks=tuple(stream.damaged_chunks),
+                   unreadable_inside=not stream.complete and is_complete(p),
                    counts=counts, unknown=unknown, first_log_time_s=first, last_log_time_s=last, metadata=metadata,
                    attachments=attachments)
 
@@ -158,10 +191,27 @@ def _open(p: Path) -> BinaryIO:
     return f
 
 
+def _check_helm(p: Path, helm: Mapping[str, str] | None) -> None:
+    """The ``helm`` metadata the audit runs with (``executive.loop``), when the log has it."""
+    if helm is None:
+        return  # a log from before the audit: the audit says so
+    goal = helm.get("goal_index", "0")
+    if not (goal.isascii() and goal.isdigit()):
+        raise LogError(f"{p}: metadata helm.goal_index: expected a goal index (0, 1, ...); got {goal!r}")
+    if "config" in helm:
+        try:
+            check_fields(HelmConfig.from_json(helm["config"]), "helm.config")
+        except PayloadError as exc:
+            raise LogError(f"{p}: metadata {exc}") from None
+        except Exception as exc:  # noqa: BLE001 - untrusted text: whatever the parser raises, the key is named
+            raise LogError(f"{p}: metadata helm.config: not a helm configuration the executive writes"
+                           f" ({type(exc).__name__}: {exc})") from None
+
+
 def _stream_messages(p: Path) -> Iterator[tuple[Channel, Message]]:
     channels: dict[int, Channel] = {}
     with _open(p) as f:
-        for r in RecordStream(f, os.fstat(f.fileno()).st_size):
+        for r in BoundedRecords(f, os.fstat(f.fileno()).st_size, p):
             if isinstance(r, Channel):
                 channels[r.id] = r
             elif isinstance(r, Message):

@@ -31,6 +31,7 @@ from typing import Any
 
 from executive import mavlink_bridge as bridge
 from planner.shore.replay.divelog import DiveLog, LogMessage
+from planner.shore.replay.payloads import mavlink_value
 from executive.recorder import LogError, Topic
 
 __all__ = ["RestreamResult", "rebuild", "restream"]
@@ -75,7 +76,7 @@ def restream(log: DiveLog, address: str, *, speed: float = 10.0, stop: threading
     last_text: tuple[float, Any] | None = None
     start = time.monotonic()
     try:
-        for m in log.messages((Topic.MAVLINK_RX, Topic.MAVLINK_TX)):
+        for m in log.messages((Topic.MAVLINK_RX, Topic.MAVLINK_TX), keep_undecodable=True):
             p = m.payload
             if not _wanted(m.topic, p, executive=executive):
                 continue
@@ -123,7 +124,7 @@ def rebuild(payload: Mapping[str, Any]) -> Any:
     if not isinstance(fields, Mapping):
         raise ValueError(f"{name}: no fields")
     lengths = dict(zip(cls.ordered_fieldnames, cls.array_lengths, strict=True))
-    kwargs = {f: _field(name, f, fields[f], kind, lengths[f])
+    kwargs = {f: mavlink_value(name, f, fields[f], kind, lengths[f])
               for f, kind in zip(cls.fieldnames, cls.fieldtypes, strict=True) if f in fields}
     try:
         return cls(**kwargs)
@@ -160,29 +161,6 @@ def _wanted(topic: Topic, payload: Mapping[str, Any], *, executive: bool) -> boo
     if topic is Topic.MAVLINK_RX:
         return component == bridge.AUTOPILOT_COMPONENT
     return executive and component == bridge.EXECUTIVE_COMPONENT and payload.get("name") in _EXECUTIVE_MESSAGES
-
-
-def _field(name: str, fname: str, value: Any, kind: str, length: int) -> Any:
-    if kind == "char":  # char[n] is text (bytes on the wire)
-        if isinstance(value, str):
-            return value.encode("utf-8")
-        raise ValueError(f"{name}.{fname}: expected text; got {value!r}")
-    if length:
-        if not isinstance(value, list) or len(value) != length:
-            raise ValueError(f"{name}.{fname}: expected {length} values; got {value!r}")
-        return [_scalar(name, fname, v, kind) for v in value]
-    return _scalar(name, fname, value, kind)
-
-
-def _scalar(name: str, fname: str, value: Any, kind: str) -> Any:
-    if kind in ("float", "double"):
-        if value is None:
-            return math.nan  # the recorder writes NaN as null
-        if isinstance(value, int | float) and not isinstance(value, bool):
-            return float(value)
-    elif isinstance(value, int) and not isinstance(value, bool):
-        return value
-    raise ValueError(f"{name}.{fname}: expected a {kind}; got {value!r}")
 
 
 def _wait(due_wall_s: float, stop: threading.Event | None) -> bool:

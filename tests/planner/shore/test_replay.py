@@ -15,61 +15,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+from mcap.records import Message
 from mcap.writer import Writer
 
 from planner.shore.replay.audit import audit
 from planner.shore.replay.dive import load_dive, path_length_m
 from planner.shore.replay.divelog import open_dive
-from executive.recorder import LogError, RecordStream, Recorder, Topic, read_messages, recover
+from executive.recorder import LogError, Recorder, Topic, read_messages, recover
 from planner.shore.replay.summary import distance_to_polyline_m, summarise
 from planner.cli import main as lrauv
 from planner.contract.actions import Action
 
+from tests.planner.shore.mcap_logs import rewrite_log
 from tests.support.helpers import start_west_of_goal
-
-def _rewrite(src: Path, dst: Path, transform: Callable[[str, Message], bytes | None] = lambda t, m: m.data, *,
-             extra_channel: str | None = None, attachments: Callable[[Attachment], bytes] | None = None) -> Path:
-    """Copy ``src`` record by record, each message's data through ``transform`` (None drops it)."""
-    with open(src, "rb") as f, open(dst, "wb") as out:
-        writer: Writer | None = None
-        topics: dict[int, str] = {}
-        schemas: dict[int, int] = {0: 0}
-        channels: dict[int, int] = {}
-        extra_id = None
-        for r in RecordStream(f, src.stat().st_size):
-            if isinstance(r, Header):
-                writer = Writer(out)
-                writer.start(r.profile, r.library)
-                if extra_channel is not None:
-                    schema = writer.register_schema("other.Thing", "jsonschema", b"{}")
-                    extra_id = writer.register_channel(extra_channel, "json", schema)
-            elif isinstance(r, Schema):
-                assert writer is not None
-                schemas[r.id] = writer.register_schema(r.name, r.encoding, r.data)
-            elif isinstance(r, Channel):
-                assert writer is not None
-                channels[r.id] = writer.register_channel(r.topic, r.message_encoding, schemas[r.schema_id],
-                                                         dict(r.metadata))
-                topics[r.id] = r.topic
-            elif isinstance(r, Message):
-                assert writer is not None
-                data = transform(topics[r.channel_id], r)
-                if data is not None:
-                    writer.add_message(channels[r.channel_id], r.log_time, data, r.publish_time, r.sequence)
-                if extra_id is not None and r.sequence % 100 == 0:
-                    writer.add_message(extra_id, r.log_time, b'{"x":1}', r.publish_time, r.sequence)
-            elif isinstance(r, Attachment):
-                assert writer is not None
-                data = r.data if attachments is None else attachments(r)
-                writer.add_attachment(r.create_time, r.log_time, r.name, r.media_type, data)
-            elif isinstance(r, Metadata):
-                assert writer is not None
-                writer.add_metadata(r.name, dict(r.metadata))
-        assert writer is not None
-        writer.finish()
-    return dst
-
 
 def _decisions(path: Path) -> list[dict]:
     """The logged decisions in the order they were made (file order)."""
@@ -161,7 +119,7 @@ def test_the_audit_reports_a_tampered_decision(dive_log, tmp_path, capsys):
             return m.data
         return json.dumps({**json.loads(m.data), "action": "DRIFT"}).encode()
 
-    bad = _rewrite(dive_log, tmp_path / "tampered.mcap", tamper)
+    bad = rewrite_log(dive_log, tmp_path / "tampered.mcap", tamper)
     result = audit(open_dive(bad))
     assert result.decisions == len(decisions)
     assert [m.time_s for m in result.mismatches] == [decisions[victim]["time_s"]]
@@ -176,7 +134,7 @@ def test_the_audit_notices_a_table_that_is_not_the_one_used(dive_log, tmp_path, 
 
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)  # the same grid, another goal
     other = plan_for(synthetic_forecast, Goal(lon_deg=lon, lat_deg=lat, depth_m=0.0)).table.to_bytes()
-    bad = _rewrite(dive_log, tmp_path / "other-table.mcap", attachments=lambda a: other)
+    bad = rewrite_log(dive_log, tmp_path / "other-table.mcap", attachments=lambda a: other)
     result = audit(open_dive(bad))
     assert not result.clean and result.decisions == len(_decisions(dive_log))
 
@@ -191,7 +149,7 @@ def test_the_audit_notices_a_dropped_decision(dive_log, tmp_path):
                 return None
         return m.data
 
-    result = audit(open_dive(_rewrite(dive_log, tmp_path / "dropped.mcap", drop_one)))
+    result = audit(open_dive(rewrite_log(dive_log, tmp_path / "dropped.mcap", drop_one)))
     assert result.mismatches  # every decision after the gap is paired with the wrong one
     assert result.mismatches[0].logged is not None and result.mismatches[0].audited is not None
 
@@ -270,7 +228,7 @@ def test_a_decision_that_records_another_slice_is_a_difference(timed_dive_log, t
     decisions = _decisions(timed_dive_log)
     # Slices 0 and 2 have the same actions: the slice alone differs, and the audit goes on from the same helm.
     victim = next(n for n, d in enumerate(decisions) if d["slice"] == 2 and d["situation"] == "following")
-    result = audit(open_dive(_rewrite(timed_dive_log, tmp_path / "slice.mcap", _with_slice(victim, 0))))
+    result = audit(open_dive(rewrite_log(timed_dive_log, tmp_path / "slice.mcap", _with_slice(victim, 0))))
     assert [m.time_s for m in result.mismatches] == [decisions[victim]["time_s"]]
     mismatch = result.mismatches[0]
     assert mismatch.logged is not None and mismatch.audited is not None
@@ -281,7 +239,7 @@ def test_a_decision_that_records_another_slice_is_a_difference(timed_dive_log, t
     demo = timed_table.slice_table(0).actions
     drift = next(n for n, d in enumerate(decisions) if d["slice"] == 1 and d["situation"] == "following"
                  and d["action"] == "DRIFT" and demo[tuple(d["cell"])] != Action.DRIFT)
-    result = audit(open_dive(_rewrite(timed_dive_log, tmp_path / "drift.mcap", _with_slice(drift, 0))))
+    result = audit(open_dive(rewrite_log(timed_dive_log, tmp_path / "drift.mcap", _with_slice(drift, 0))))
     first = result.mismatches[0]
     assert first.time_s == decisions[drift]["time_s"] and first.audited is not None
     assert first.audited["slice"] == 1 and first.audited["action"] != "DRIFT"
@@ -333,7 +291,7 @@ def test_a_missing_log_gets_a_clear_message(tmp_path, capsys):
 
 
 def test_unknown_channels_are_named_and_skipped(dive_log, tmp_path, capsys):
-    mixed = _rewrite(dive_log, tmp_path / "mixed.mcap", extra_channel="/payload/ctd")
+    mixed = rewrite_log(dive_log, tmp_path / "mixed.mcap", extra_channel="/payload/ctd")
     log = open_dive(mixed)
     assert log.unknown["/payload/ctd"] > 0
     code = lrauv(["replay", str(mixed), "--no-audit"])
