@@ -7,6 +7,14 @@ any simulator speedup (ArduPilot SITL's time_boot_ms scales with its
 silence, vehicle time is extrapolated from wall time at the rate observed so
 far, so the heartbeat keeps its 1 Hz in vehicle time and a silent link is
 noticed after the right number of vehicle seconds.
+
+At a simulator speedup (a measured rate of 2x or more, or before any rate is measured)
+vehicle time does not run on during the first ``SILENCE_GRACE_WALL_S`` of wall time
+after the last timestamp: a simulator in lockstep (``vehicle_sim``) waits for the
+executive, and a simulator on a busy machine may be descheduled for milliseconds that
+are seconds of vehicle time at 1000x; neither is a silent link. After the grace, time
+runs on at the measured rate from the last timestamp, so a real silence is still
+noticed, one grace late. At real time (a vehicle, rate near 1) nothing changes.
 """
 
 from __future__ import annotations
@@ -22,6 +30,10 @@ _MIN_SPAN_WALL_S = 0.02
 _FIRST_SPAN_WALL_S = 0.005
 # time_boot_ms going back by more than this is a reboot of the autopilot, not reordering.
 _REBOOT_BACKSTEP_S = 5.0
+# Wall seconds of silence during which a simulator's time is not extrapolated (see the module docstring).
+SILENCE_GRACE_WALL_S = 1.0
+# Rates from this up are a simulator's speedup (a vehicle runs at 1x).
+_SIMULATOR_RATE = 2.0
 
 
 @dataclass(slots=True)
@@ -65,12 +77,26 @@ class VehicleClock:
             self._anchor_vehicle_s, self._anchor_wall_s = time_boot_s, wall_s
         return False
 
+    @property
+    def last_s(self) -> float | None:
+        """The newest vehicle timestamp seen (None before the first)."""
+        return self._vehicle_s
+
+    def _grace_s(self) -> float:
+        """Wall seconds of silence not extrapolated: the grace at a simulator's speedup, else none."""
+        return SILENCE_GRACE_WALL_S if (not self._rated or self.rate >= _SIMULATOR_RATE) else 0.0
+
     def now_s(self, wall_s: float) -> float:
         """Vehicle time now: the last timestamp plus the extrapolated time since it arrived."""
         if self._vehicle_s is None:
             return 0.0
-        return self._vehicle_s + max(0.0, wall_s - self._wall_s) * self.rate
+        return self._vehicle_s + max(0.0, wall_s - self._wall_s - self._grace_s()) * self.rate
 
     def wall_until(self, vehicle_s: float, wall_s: float) -> float:
         """Wall seconds until vehicle time reaches ``vehicle_s`` (0 when already past)."""
-        return max(0.0, (vehicle_s - self.now_s(wall_s)) / max(self.rate, 1e-9))
+        if self._vehicle_s is None:
+            return max(0.0, vehicle_s / max(self.rate, 1e-9))
+        if vehicle_s <= self.now_s(wall_s):
+            return 0.0
+        due_wall = self._wall_s + self._grace_s() + (vehicle_s - self._vehicle_s) / max(self.rate, 1e-9)
+        return max(0.0, due_wall - wall_s)
