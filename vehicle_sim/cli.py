@@ -61,6 +61,13 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--heading-deg", default="0", help="heading at boot, compass degrees (default 0)")
     p.add_argument("--start-time", help="UTC time of boot, ISO 8601 (default: the forecast's first time)")
     p.add_argument("--speedup", default="1", help="simulated seconds per wall second, like SITL (default 1)")
+    p.add_argument("--lockstep", action=argparse.BooleanOptionalAction, default=None,
+                   help="never step the physics past what the executive has reported handled (TIMESYNC), plus "
+                        "--lockstep-slack-s: the same dive on a quiet or a busy machine (default: on when "
+                        "--speedup > 1; before the first report the vehicle waits up to 30 s of wall time)")
+    p.add_argument("--lockstep-slack-s", default="0",
+                   help="with --lockstep: simulated seconds the physics may run beyond the executive's report; "
+                        "0 (default) makes a dive repeat exactly, a few seconds ride out a lossy link")
     p.add_argument("--listen", default="127.0.0.1:14560", help="HOST:PORT to bind; port 0 = any free port")
     p.add_argument("--seed", default="0", help="seed of the sensor noise (default 0)")
     p.add_argument("--position-delay-s", default="41", help="seconds until the EKF has a position (default 41)")
@@ -100,7 +107,10 @@ def run(args: argparse.Namespace) -> int:
         state = "armed" if sim.armed else "disarmed"
         print(f"lrauv sim: stopped at {sim.time_s:.1f} s simulated after {wall:.1f} s wall "
               f"({sim.time_s / wall:.0f}x); {sim.mode.name} {state}, {sim.energy_used_wh:.1f} Wh used, "
-              f"{sim.stats.parse_errors} undecodable input(s)", file=sys.stderr)
+              f"{sim.stats.parse_errors} undecodable input(s)"
+              + (f"; lockstep: waited {sim.stats.lockstep_waits} times, ran free {sim.stats.lockstep_expired},"
+                 f" resent {sim.stats.lockstep_resends}" if config.lockstep_slack_s is not None else ""),
+              file=sys.stderr)
     return 0
 
 
@@ -151,6 +161,8 @@ def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None
     delay = _number(args.position_delay_s, "--position-delay-s", "seconds >= 0", lambda x: x >= 0)
     hb_timeout = _number(args.heartbeat_timeout_s, "--heartbeat-timeout-s", "seconds >= 0 (0 disables)",
                          lambda x: x >= 0)
+    slack = _number(args.lockstep_slack_s, "--lockstep-slack-s", "simulated seconds >= 0", lambda x: x >= 0)
+    lockstep = speedup > 1 if args.lockstep is None else args.lockstep
     duration = None
     if args.duration_s is not None:
         duration = _number(args.duration_s, "--duration-s", "simulated seconds > 0", lambda x: x > 0)
@@ -179,7 +191,7 @@ def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None
         start_offset_s=offset_s, speedup=speedup, host=host, port=port, seed=seed,
         autopilot=AutopilotSettings(position_delay_s=delay, heartbeat_timeout_s=hb_timeout,
                                     failsafe=FailsafeAction(args.failsafe)),
-        track_path=args.track,
+        track_path=args.track, lockstep_slack_s=slack if lockstep else None,
     )
     if getattr(args, "mission", None) is not None:  # one set of vehicle figures for planner and simulator
         from dataclasses import replace

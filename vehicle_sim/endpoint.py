@@ -12,6 +12,28 @@ stream at most at 1 / dt_s = 10 Hz by default), polls the socket without blockin
 what is due, and sleeps so that simulated time runs at ``speedup`` x wall time; when it
 cannot keep up it runs flat out. Behaviour lives in ``autopilot``, physics in ``dynamics``,
 currents in ``world``; this module only moves bytes and clocks.
+
+Lockstep (``SimConfig.lockstep_slack_s`` not None), in the spirit of ArduPilot's lockstep
+SITL, where the physics waits for the autopilot's output for each frame: here the vehicle
+waits for its companion computer. The executive reports, with a TIMESYNC request (tc1 = 0,
+ts1 = vehicle time in ns) from a component of this system other than the autopilot, the
+vehicle time up to which it has handled the telemetry; it starts to once the vehicle has
+asked with a TIMESYNC request of its own, which the vehicle sends (with its newest step
+again, in case that was lost) whenever it has waited 0.1 s of wall time for a report.
+The loop steps the physics only
+while that report covers the newest timestamped message sent (GLOBAL_POSITION_INT,
+ATTITUDE, SYSTEM_TIME), or while the next step stays within ``lockstep_slack_s`` of it.
+So the executive's commands for a message are in force from the same step on any
+machine, quiet or busy, and the vehicle never outruns the executive's heartbeat. With
+slack 0 a dive is the same from the same seed; a slack of a few seconds keeps a lossy
+link (lost telemetry or reports) from stalling the loop, at the price of that exactness.
+Each step's frames then go out as one datagram per peer (a step's messages arrive
+together), and a stream whose interval is changed starts on a multiple of its interval
+(the 1 Hz HEARTBEAT always shares a datagram with the 2 Hz position). Without a report
+(before the executive starts: ``lockstep_first_wait_wall_s``; when its report stops
+advancing, as when it stops, restarts or the uplink is cut: ``lockstep_wait_wall_s``)
+the loop waits that many wall seconds and then runs free at its speedup until a report
+advances again.
 """
 
 from __future__ import annotations
@@ -64,6 +86,10 @@ _CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL
 _NEEDS_READING = frozenset({Msg.GLOBAL_POSITION_INT, Msg.ATTITUDE, Msg.VFR_HUD})
 _MAX_LAG_WALL_S = 0.25  # behind by more than this: stop trying to catch up (run flat out from here)
 _MIN_SLEEP_S = 0.0005
+_LOCKSTEP_POLL_WALL_S = 0.05  # longest select while waiting for a lockstep report
+_RESEND_WALL_S = 0.1  # waiting this long for a report: send the newest step again, and a TIMESYNC request
+_TIMED = frozenset({Msg.GLOBAL_POSITION_INT, Msg.ATTITUDE, Msg.SYSTEM_TIME})  # messages with time_boot_ms
+_MAX_BATCH_BYTES = 8192  # one datagram per step, well under UDP's 65507
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,12 +111,25 @@ class SimConfig:
     track_path: Path | None = None
     track_interval_s: float = 1.0
     peer_timeout_s: float = 10.0  # wall seconds without a datagram before a peer stops getting output
+    # Lockstep with the executive (module docstring): None runs free; else the vehicle seconds the
+    # physics may run beyond the executive's report (0: never past the newest timestamp it has not handled).
+    lockstep_slack_s: float | None = None
+    lockstep_first_wait_wall_s: float = 30.0  # wall s to wait for the first report before running free
+    # Wall s without the report advancing before running free: the executive's own grace before its clock
+    # runs on through a silence (executive.clock), so that with the link cut both go on together.
+    lockstep_wait_wall_s: float = 1.0
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speedup) and self.speedup > 0):
             raise ValueError(f"SimConfig.speedup: expected a number > 0; got {self.speedup!r}")
         if not (0.001 <= self.dt_s <= 1.0):
             raise ValueError(f"SimConfig.dt_s: expected 0.001..1 s; got {self.dt_s!r}")
+        if self.lockstep_slack_s is not None and not (math.isfinite(self.lockstep_slack_s)
+                                                      and self.lockstep_slack_s >= 0):
+            raise ValueError(f"SimConfig.lockstep_slack_s: expected seconds >= 0 or None; got {self.lockstep_slack_s!r}")
+        for name in ("lockstep_first_wait_wall_s", "lockstep_wait_wall_s"):
+            if not (getattr(self, name) > 0):
+                raise ValueError(f"SimConfig.{name}: expected wall seconds > 0; got {getattr(self, name)!r}")
 
 
 @dataclass
@@ -104,17 +143,38 @@ class SimStats:
     messages_out: int = 0
     send_errors: int = 0
     lag_resets: int = 0  # times the loop fell more than 0.25 s (wall) behind the asked speedup
+    lockstep_waits: int = 0  # times the loop waited for the executive's report
+    lockstep_expired: int = 0  # times it gave up waiting and ran free (no executive, or its report stopped)
+    lockstep_resends: int = 0  # times it sent its newest timestamped step again while waiting
 
 
 class _Fanout:
     """The file pymavlink writes frames to: one datagram per frame to every live peer."""
 
-    def __init__(self, sock: socket.socket, stats: SimStats) -> None:
+    def __init__(self, sock: socket.socket, stats: SimStats, *, batch: bool = False) -> None:
         self.sock = sock
         self.stats = stats
         self.targets: list[tuple[str, int]] = []
+        self.batch = batch  # hold frames until ``flush``: a step's frames in one datagram (lockstep)
+        self._held = bytearray()
+        self.last: bytes | None = None  # the last datagram flushed
 
     def write(self, buf: bytes) -> None:
+        if self.batch:
+            if len(self._held) + len(buf) > _MAX_BATCH_BYTES:
+                self.flush()
+            self._held += buf
+            return
+        self.sendto_all(buf)
+
+    def flush(self) -> None:
+        if self._held:
+            buf = bytes(self._held)
+            self._held.clear()
+            self.sendto_all(buf)
+            self.last = buf
+
+    def sendto_all(self, buf: bytes) -> None:
         for addr in self.targets:
             try:
                 self.sock.sendto(buf, addr)
@@ -168,7 +228,15 @@ class Simulator:
             raise
         self._sock.setblocking(False)
         self.host, self.port = self._sock.getsockname()[:2]
-        self._fanout = _Fanout(self._sock, self.stats)
+        self._lockstep_ms = None if config.lockstep_slack_s is None else round(config.lockstep_slack_s * 1000)
+        self._fanout = _Fanout(self._sock, self.stats, batch=self._lockstep_ms is not None)
+        self._reported_ms: int | None = None  # the executive's newest lockstep report
+        self._report_wall = time.monotonic()  # when it last advanced (or the run started)
+        self._timed_sent_ms: int | None = None  # time_boot_ms of the newest timestamped message sent
+        self._timed_batch: bytes | None = None  # the datagram that carried it
+        self._resend_wall = 0.0  # when it was sent (again)
+        self._free = False  # stepping without the executive (its report is overdue)
+        self._waiting = False  # waiting for its report
         self._peers: dict[tuple[str, int], float] = {}  # address -> wall time last heard
         self._wall = time.monotonic()
         self._next_prune_wall = self._wall + 1.0
@@ -183,6 +251,8 @@ class Simulator:
             mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED: self._on_local_ned,
             mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_GLOBAL_INT: self._on_global_int,
         }
+        if self._lockstep_ms is not None:
+            self._handlers[mavlink.MAVLINK_MSG_ID_TIMESYNC] = self._on_timesync
         self._closed = False
 
     # -- what tests and the CLI read ---------------------------------------------------------
@@ -213,6 +283,15 @@ class Simulator:
     def peers(self) -> list[tuple[str, int]]:
         return list(self._fanout.targets)
 
+    def route(self, data: bytes) -> None:
+        """Send ``data`` as it is to every peer, as the autopilot routes a ground station's frames (for tests)."""
+        self._fanout.sendto_all(data)
+
+    @property
+    def reported_s(self) -> float | None:
+        """Lockstep: the newest vehicle time the executive has reported handled (None before its first report)."""
+        return None if self._reported_ms is None else self._reported_ms / 1000.0
+
     # -- running ---------------------------------------------------------------------------------
 
     def run(self, duration_s: float | None = None, stop_event: threading.Event | None = None) -> None:
@@ -223,10 +302,25 @@ class Simulator:
         wall0 = time.monotonic()
         sim0 = self._t_ms
         sock = self._sock
+        self._report_wall = wall0  # a wait for the executive's report counts from here
         while end_ms is None or self._t_ms < end_ms:
             if stop_event is not None and stop_event.is_set():
                 break
             wall = time.monotonic()
+            if self._lockstep_ms is not None and not self._may_step(wall):
+                if wall - self._resend_wall >= _RESEND_WALL_S:  # the step or its report may be lost: ask again
+                    self._resend_wall = wall
+                    if self._timed_batch is not None:  # the executive drops a repeat
+                        self._fanout.sendto_all(self._timed_batch)
+                        self.stats.lockstep_resends += 1
+                    self._mav.timesync_send(0, self._t_ms * 1_000_000)  # "where are you?": answered by a report
+                    self._fanout.flush()
+                readable, _, _ = select.select([sock], [], [], _LOCKSTEP_POLL_WALL_S)
+                if readable:
+                    self._wall = time.monotonic()
+                    self._poll()
+                wall0, sim0 = time.monotonic(), self._t_ms  # the pace starts afresh after a wait
+                continue
             ahead_ms = self._t_ms - sim0 - (wall - wall0) * rate_ms
             if ahead_ms > 0.0:
                 wait = ahead_ms / rate_ms
@@ -256,7 +350,11 @@ class Simulator:
         current = self.world.current_at(self.config.start_offset_s + now_s, body.lat_deg, body.lon_deg, body.depth_m)
         self._body = step(body, ap.setpoint, current, self.params, self._dt_s)
         self._t_ms += self._dt_ms
+        timed = self._timed_sent_ms
         self._send_due()
+        self._fanout.flush()
+        if self._timed_sent_ms != timed:
+            self._timed_batch, self._resend_wall = self._fanout.last, self._wall
         if self._track is not None and self._t_ms >= self._track_due_ms:
             self._track_due_ms = self._t_ms + self._track_every_ms
             self._write_track()
@@ -294,6 +392,7 @@ class Simulator:
                 self._fanout.targets.append(addr)
             self._peers[addr] = self._wall
             self._receive(data)
+            self._fanout.flush()  # replies (COMMAND_ACK, STATUSTEXT) go out at once
 
     def _receive(self, data: bytes) -> None:
         parser = self._parser
@@ -327,6 +426,35 @@ class Simulator:
 
     def _source(self, msg: Any) -> tuple[int, int]:
         return msg.get_srcSystem(), msg.get_srcComponent()
+
+    def _may_step(self, wall: float) -> bool:
+        """Lockstep: whether the physics may take its next step now (module docstring)."""
+        reported = self._reported_ms
+        if reported is not None and (self._timed_sent_ms is None or reported >= self._timed_sent_ms
+                                     or self._t_ms + self._dt_ms <= reported + (self._lockstep_ms or 0)):
+            self._free = self._waiting = False
+            return True
+        if self._free:
+            return True
+        limit = self.config.lockstep_first_wait_wall_s if reported is None else self.config.lockstep_wait_wall_s
+        if wall - self._report_wall >= limit:
+            self._free, self._waiting = True, False
+            self.stats.lockstep_expired += 1
+            return True
+        if not self._waiting:
+            self._waiting = True
+            self.stats.lockstep_waits += 1
+        return False
+
+    def _on_timesync(self, msg: Any) -> None:
+        """A lockstep report: a TIMESYNC request (tc1 = 0) from a companion computer of this vehicle."""
+        if msg.tc1 != 0 or msg.ts1 < 0 or msg.get_srcSystem() != SYSTEM_ID or msg.get_srcComponent() == COMPONENT_ID:
+            return  # an answer, or a ground station's request (ArduSub would answer it; this simulator does not)
+        reported = msg.ts1 // 1_000_000
+        if self._reported_ms is None or reported > self._reported_ms:
+            self._reported_ms = reported
+            self._report_wall = self._wall
+            self._free = False  # the executive is (back) in step: wait for it again
 
     def _on_heartbeat(self, msg: Any) -> None:
         self._do(self.autopilot.heartbeat(self.time_s, msg.get_srcSystem(), msg.get_srcComponent()))
@@ -368,6 +496,8 @@ class Simulator:
                     if s.msg_id == out.message_id:
                         s.interval_ms = None if out.interval_s is None else max(1, round(out.interval_s * 1000))
                         s.due_ms = self._t_ms
+                        if self._lockstep_ms is not None and s.interval_ms is not None:  # on a multiple of it
+                            s.due_ms = -(-self._t_ms // s.interval_ms) * s.interval_ms
             elif isinstance(out, SendOnce) and self._fanout.targets:
                 self._send(out.message_id, self._observe())
 
@@ -408,6 +538,8 @@ class Simulator:
         t_ms = self._t_ms
         if reading is None:
             reading = Reading(b.lat_deg, b.lon_deg, b.depth_m, b.heading_deg)
+        if msg_id in _TIMED:
+            self._timed_sent_ms = t_ms
         if msg_id == Msg.GLOBAL_POSITION_INT:
             alt_mm = round(-reading.depth_m * 1000.0)  # Sub: altitude negative below the surface
             mav.global_position_int_send(

@@ -171,7 +171,7 @@ def test_cli_runs_on_a_sequence_past_the_first_issue(tmp_path, issues):
     track = tmp_path / "t.csv"
     # 34 h after issue 0's start: beyond issue 0 (30 h), inside issue 1 (6..36 h).
     done = sim_cli("--forecast", str(issues[1]), "--forecast", str(issues[0]), "--start", f"{LON},{LAT}",
-                "--start-time", "2026-01-16T10:00:00Z", "--speedup", "1e9", "--listen", "127.0.0.1:0",
+                "--start-time", "2026-01-16T10:00:00Z", "--speedup", "1e9", "--no-lockstep", "--listen", "127.0.0.1:0",
                 "--duration-s", "30", "--track", str(track), "--quiet")
     assert done.returncode == 0, done.stderr
     assert len(track.read_text().splitlines()) == 1 + 31

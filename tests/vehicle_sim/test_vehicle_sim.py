@@ -709,12 +709,12 @@ def test_cli_bad_input_is_one_line_and_status_2(args, synthetic_forecast):
 def test_cli_runs_for_a_duration_and_stops_cleanly_on_sigterm(tmp_path, synthetic_forecast):
     track = tmp_path / "t.csv"
     done = sim_cli("--forecast", str(synthetic_forecast), "--start", "-118.10,33.45", "--speedup", "1e9",
-                "--listen", "127.0.0.1:0", "--duration-s", "120", "--track", str(track), "--quiet")
+                "--no-lockstep", "--listen", "127.0.0.1:0", "--duration-s", "120", "--track", str(track), "--quiet")
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("lrauv sim: listening on udp 127.0.0.1:") and done.stderr == ""
     assert len(track.read_text().splitlines()) == 1 + 121  # header, rows at 0..120 s
 
-    proc = subprocess.Popen([sys.executable, "-m", "vehicle_sim", "sim", "--calm", "--speedup", "10",
+    proc = subprocess.Popen([sys.executable, "-m", "vehicle_sim", "sim", "--calm", "--speedup", "10", "--no-lockstep",
                              "--listen", "127.0.0.1:0", "--track", str(track)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, cwd=REPO)
     try:
