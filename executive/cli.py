@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from executive.helm import HelmConfig
 from planner.contract.arguments import Subcommands
@@ -86,6 +86,19 @@ def run(args: argparse.Namespace) -> int:
     return _exec(args)
 
 
+def _safety_stop(resumed: Any) -> Any:
+    """The safety stop a resumed run saved (it holds until an operator clears it), as the helm's Situation."""
+    from executive.state import Situation
+
+    if resumed is None or resumed.safety_stop is None:
+        return None
+    try:
+        return Situation(resumed.safety_stop)
+    except ValueError:
+        raise ExecutiveError(f"--resume: the saved safety_stop {resumed.safety_stop!r} is not a known limit;"
+                             f" expected one of {', '.join(s.value for s in Situation)}") from None
+
+
 def _exec(args: argparse.Namespace) -> int:
     from executive.loop import ExecConfig, Executive
     from executive.signing import load_key
@@ -93,6 +106,7 @@ def _exec(args: argparse.Namespace) -> int:
     from executive import durable, goal_tables
 
     resumed = None
+    mission_loaded = None
     if args.resume is not None:
         resumed = durable.load(args.resume)
         args.mission = args.mission or resumed.mission_path
@@ -114,7 +128,7 @@ def _exec(args: argparse.Namespace) -> int:
         on_arrival = plan.goal.on_arrival if plan.goal is not None else helm.on_arrival
         helm = replace(helm, on_arrival=on_arrival)
         if args.mission is not None:
-            m = _load_mission(args.mission)
+            m = mission_loaded = _load_mission(args.mission)
             helm = replace(_helm_figures(m), on_arrival=on_arrival)
             if watch is None and m.forecast.directory is not None:
                 watch = m.forecast.directory
@@ -124,6 +138,7 @@ def _exec(args: argparse.Namespace) -> int:
                                where=m.signing.where)
     elif args.mission is not None:
         helm, plan, mission = _mission_setup(args.mission, paths, tables, args.on_arrival)
+        mission_loaded = mission
         if watch is None and mission.forecast.directory is not None:
             watch = mission.forecast.directory
         period_s, replan_on_new = mission.replanning.period_s, mission.replanning.on_new_forecast
@@ -159,6 +174,7 @@ def _exec(args: argparse.Namespace) -> int:
     log_path.parent.mkdir(parents=True, exist_ok=True)
     state_dir = args.state_dir or log_path.with_name(log_path.stem + "-state")
     config = ExecConfig(
+        coverage=None if mission_loaded is None else mission_loaded.region.bbox,
         link=args.link, log_path=log_path, helm=helm, exit_on_arrival=args.exit_on_arrival, linger_s=args.linger_s,
         max_wall_s=args.max_wall_s, max_vehicle_s=None if args.max_vehicle_h is None else args.max_vehicle_h * 3600.0,
         gcs_link=args.gcs, mission_path=args.mission, watch_dir=watch, work_dir=args.work_dir,
@@ -177,7 +193,8 @@ def _exec(args: argparse.Namespace) -> int:
                            "goal_index": str(plan.index), "previous_log": str(resumed.log_path or ""),
                            "recovered": recovered or ""}
     try:
-        executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta)
+        executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta,
+                              safety_stop=_safety_stop(resumed))
     except OSError as exc:
         raise ExecutiveError(f"--link {args.link} or --gcs {args.gcs}: cannot open: {exc}") from None
     stop = threading.Event()

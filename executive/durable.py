@@ -44,6 +44,7 @@ class Resumed:
     log_path: Path | None
     mission_path: Path | None
     saved_utc: str
+    safety_stop: str | None = None  # the limit that fired (helm Situation value): it holds after a restart
 
 
 def _table_name(table: PolicyTable) -> str:
@@ -51,7 +52,7 @@ def _table_name(table: PolicyTable) -> str:
 
 
 def save(state_dir: Path, plan: MissionPlan, blobs: Mapping[int, bytes], *, log_path: Path,
-         mission_path: Path | None) -> Path:
+         mission_path: Path | None, safety_stop: str | None = None) -> Path:
     """Write the tables ``plan`` uses (those not yet there), then ``state.json``; returns its path."""
     tables_dir = state_dir / "tables"
     names: list[str | None] = []
@@ -72,6 +73,7 @@ def save(state_dir: Path, plan: MissionPlan, blobs: Mapping[int, bytes], *, log_
         "tables": names,
         "log": os.fspath(log_path),
         "mission": None if mission_path is None else os.fspath(mission_path),
+        "safety_stop": safety_stop,
     }
     return write_atomic(state_dir / STATE_FILE, (json.dumps(state, indent=1) + "\n").encode())
 
@@ -121,4 +123,5 @@ def _parse(state: Mapping[str, Any], state_dir: Path, path: Path) -> Resumed:
     return Resumed(plan=MissionPlan(goals=goals, tables=tuple(tables), index=index), blobs=blobs,
                    log_path=Path(state["log"]) if state.get("log") else None,
                    mission_path=Path(state["mission"]) if state.get("mission") else None,
-                   saved_utc=str(state.get("saved_utc", "")))
+                   saved_utc=str(state.get("saved_utc", "")),
+                   safety_stop=str(state["safety_stop"]) if state.get("safety_stop") else None)

@@ -15,8 +15,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
-from planner.contract.errors import ExecutiveError
-from planner.contract.mission import MissionGoal
+from planner.contract.errors import ExecutiveError, LrauvError
+from planner.contract.mission import MissionGoal, goals_to_items, items_to_goals
+from planner.contract.waypoints import MissionItem
 from planner.contract.settings import Goal, OnArrival
 from planner.contract.table import PolicyTable
 
@@ -109,12 +110,31 @@ def with_table(plan: MissionPlan, index: int, table: PolicyTable) -> MissionPlan
 
 
 def adopt(goals: tuple[MissionGoal, ...], current: MissionPlan) -> MissionPlan:
-    """A new goal list, keeping the current tables of goals that did not change."""
+    """A new goal list, keeping the current tables of goals that did not change.
+
+    A list that keeps the goals up to the active one (a mission extended mid-dive) keeps the
+    active goal: the goals already reached are not flown again. Any other list starts at goal 0.
+    """
     tables = []
     for g in goals:
         found = next((t for t in current.tables if t is not None and goal_matches(t, g.goal)), None)
         tables.append(found)
-    return MissionPlan(goals=goals, tables=tuple(tables), index=0)
+    n = current.index
+    index = n if 0 < n < len(goals) and goals[:n + 1] == current.goals[:n + 1] else 0
+    return MissionPlan(goals=goals, tables=tuple(tables), index=index)
+
+
+def flown_items(plan: MissionPlan | None, accepted: tuple[MissionItem, ...]) -> tuple[MissionItem, ...]:
+    """The mission items of the goals ``plan`` flies: the ``accepted`` upload when it is that list, else made here."""
+    if plan is None or not plan.goals:
+        return ()
+    try:
+        if accepted and items_to_goals(accepted) == plan.goals:
+            return accepted  # as the ground station sent it, with its own home item
+    except LrauvError:
+        pass
+    home = plan.goals[0].goal  # no launch point is known onboard: item 0 (home) is the first goal's position
+    return goals_to_items(plan.goals, home_lat_deg=home.lat_deg, home_lon_deg=home.lon_deg)
 
 
 def identity(table: PolicyTable | None) -> dict[str, str | None]:

@@ -37,6 +37,7 @@ from executive.state import (
     VelocityYaw,
 )
 from executive.geofence import inside
+from executive.plausibility import Limits
 from planner.contract.actions import Action
 from planner.contract.settings import BreachAction, OnArrival
 from planner.contract.steering import DEPTH_TOLERANCE_M, Steering, SteeringKind, is_complete, steer
@@ -47,7 +48,11 @@ from planner.contract.table import CELL_MARGIN, PolicyTable
 BREACH_MODE: dict[str, SubMode] = {"surface": SubMode.SURFACE, "drift": SubMode.ALT_HOLD, "hold": SubMode.GUIDED}
 # Phases in which an autopilot HEARTBEAT runs the helm too: set-up needs no position message
 # to go on. Once the policy is followed, position and attitude alone drive decisions.
-HEARTBEAT_PHASES = frozenset({Phase.WAIT_LINK, Phase.SETUP, Phase.LINK_LOST})
+HEARTBEAT_PHASES = frozenset({Phase.WAIT_LINK, Phase.SETUP, Phase.LINK_LOST, Phase.OVERRIDDEN})
+# Phases in which the autopilot's mode, arming and failsafes are the executive's to watch (docs/executive.md, "Authority").
+_WATCHED = frozenset({Phase.SETUP, Phase.RUNNING, Phase.ARRIVED, Phase.SAFE})
+# Limits that are persistent by construction fire at once; the others must hold for breach_window_s.
+_AT_ONCE = frozenset({Situation.MISSION_TIME, Situation.POSITION_LOST, Situation.LINK_LOST})
 _RATE_TRIES = 10  # rate requests sent at most this often per set-up (an autopilot may never acknowledge)
 
 # Telemetry the executive asks for (message, interval in vehicle seconds); position and
@@ -84,6 +89,12 @@ class HelmConfig:
     geofence: tuple[tuple[float, float], ...] | None = None  # (lon_deg, lat_deg) vertices
     on_breach: BreachAction = "surface"  # for every safety limit and link loss (docs/missions.md)
     rates: tuple[tuple[str, float], ...] = DEFAULT_RATES
+    # Battery, depth and geofence limits fire only when exceeded for this long (vehicle seconds).
+    breach_window_s: float = 5.0
+    position_timeout_s: float = 60.0  # no plausible position this long while following: on_breach
+    # A mode the vehicle enters within this long of the executive asking for it is the executive's own.
+    authority_window_s: float = 10.0
+    limits: Limits = field(default_factory=Limits)  # telemetry checks (executive.plausibility)
 
     def to_json(self) -> str:
         """The settings as JSON, for the log (the decision audit runs the helm again with them)."""
@@ -98,6 +109,9 @@ class HelmConfig:
         for key in ("geofence", "rates"):  # JSON arrays back to the tuples the dataclass holds
             if values.get(key) is not None:
                 values[key] = tuple(tuple(p) for p in values[key])
+        if isinstance(values.get("limits"), dict):
+            known_limits = {f.name for f in fields(Limits)}
+            values["limits"] = Limits(**{k: v for k, v in values["limits"].items() if k in known_limits})
         return cls(**values)
 
 
@@ -139,6 +153,16 @@ class HelmState:
     rates_acks: int = 0  # the vehicle's count of accepted interval requests when they last went out
     rates_tries: int = 0
     mission_start_s: float | None = None
+    # Authority: what the autopilot reported at the last update, and the modes asked for (mode, vehicle time).
+    seen_mode: int | None = None
+    seen_armed: bool = False
+    seen_failsafe: bool = False
+    asked_modes: tuple[tuple[int, float], ...] = ()
+    overridden: str | None = None  # why the executive yielded (phase OVERRIDDEN); None when it has not
+    # The safety stop: the limit that fired. It holds for the run (reboots, restarts, uploads) until an operator clears it.
+    stop: Situation | None = None
+    breach: Situation | None = None  # a limit exceeded, not yet for breach_window_s
+    breach_since_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -194,9 +218,16 @@ def step(
     if not link_ok:
         return _link_lost(helm, config, now_s, out)
     if helm.phase in (Phase.WAIT_LINK, Phase.LINK_LOST):
-        text = "autopilot heartbeat received" if helm.phase is Phase.WAIT_LINK else "link regained: setting up again"
+        regained = helm.phase is Phase.LINK_LOST
+        text = "link regained: setting up again" if regained else "autopilot heartbeat received"
         out.events.append(Event("info", text))
-        helm = replace(helm, phase=Phase.SETUP, rates_sent=False, rates_tries=0, activity=None, target_sent_s=None)
+        # After a silence the executive cannot tell a failsafe that came and went from its own on_breach
+        # request: a failsafe still on is taken as the state it comes back to, not as a new override.
+        seen = replace(helm, seen_failsafe=vehicle.autopilot_failsafe) if regained else helm
+        helm = replace(seen, phase=Phase.SETUP, rates_sent=False, rates_tries=0, activity=None, target_sent_s=None)
+    helm = _authority(helm, vehicle, config, now_s, out)
+    if helm.phase is Phase.OVERRIDDEN:
+        return Tick(helm, tuple(out.commands), tuple(out.events))  # commands nothing: a person or a failsafe has it
     helm = _rates(helm, vehicle, config, now_s, out)
     if helm.phase is Phase.SETUP:
         helm = _setup(helm, vehicle, table, config, now_s, out)
@@ -230,6 +261,38 @@ def swapped(helm: HelmState) -> HelmState:
     return replace(helm, phase=phase, activity=None, target_sent_s=None, mode_request_s=None)
 
 
+def rebooted(helm: HelmState) -> HelmState:
+    """The helm after an autopilot reboot: set up again from scratch, but a safety stop or an override holds."""
+    fresh = HelmState(stop=helm.stop, overridden=helm.overridden, mission_start_s=helm.mission_start_s)
+    return replace(fresh, phase=Phase.OVERRIDDEN) if helm.overridden is not None else fresh
+
+
+def resumed(helm: HelmState, *, clear_stop: bool) -> HelmState:
+    """An operator's explicit go: the override ends; with ``clear_stop`` the safety stop too (docs/executive.md)."""
+    stop = None if clear_stop else helm.stop
+    if helm.overridden is None and stop is helm.stop:
+        return helm
+    phase = Phase.SETUP if helm.phase in (Phase.OVERRIDDEN, Phase.SAFE) else helm.phase
+    return replace(helm, phase=phase, overridden=None, stop=stop, activity=None, target_sent_s=None,
+                   mode_request_s=None, arm_request_s=None, rates_sent=False, rates_tries=0, breach=None,
+                   breach_since_s=None)
+
+
+def resume_text(helm: HelmState, *, clear_stop: bool, source: str) -> str | None:
+    """The log line for ``resumed`` (the decision audit finds operator actions by it); None when nothing changes."""
+    parts = []
+    if helm.overridden is not None:
+        parts.append("override ended")
+    if clear_stop and helm.stop is not None:
+        parts.append(f"safety stop ({helm.stop.value}) cleared")
+    if not parts:
+        return None
+    return f"{OPERATOR_RESUME}{', '.join(parts)} by {source}: setting up again"
+
+
+OPERATOR_RESUME = "operator resume: "
+
+
 # -- phases -------------------------------------------------------------------------
 
 
@@ -255,9 +318,49 @@ def _link_lost(helm: HelmState, config: HelmConfig, now_s: float, out: _Out) -> 
     # Best effort: if only the downlink is lost the vehicle still hears this. GUIDED with no
     # new target holds station on ArduSub; ALT_HOLD without thrust drifts at depth.
     if _due(helm.mode_request_s, now_s, config.retry_s):
-        out.commands.append(SetMode(mode))
-        helm = replace(helm, mode_request_s=now_s)
+        helm = _ask_mode(helm, mode, now_s, out)
     return Tick(helm, tuple(out.commands), tuple(out.events))
+
+
+def _authority(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:
+    """Yield to a mode, a disarm or a failsafe the executive did not command (docs/executive.md, "Authority").
+
+    ArduSub changes mode by itself in one case the executive causes: SURFACE becomes ALT_HOLD
+    once at the surface (mode reason SURFACE_COMPLETE); that is not an override.
+    """
+    asked = tuple((m, t) for m, t in helm.asked_modes if now_s - t <= config.authority_window_s and t <= now_s)
+    mode, armed, failsafe = vehicle.mode, vehicle.armed, vehicle.autopilot_failsafe
+    why = None
+    if helm.phase in _WATCHED:
+        wanted = helm.activity.mode if helm.activity is not None else None
+        if (helm.seen_mode is not None and mode is not None and mode != helm.seen_mode and mode != wanted
+                and all(m != mode for m, _ in asked)
+                and not (helm.seen_mode == SubMode.SURFACE and mode == SubMode.ALT_HOLD)):
+            why = f"the autopilot's mode became {_mode_name(mode)} (from {_mode_name(helm.seen_mode)}), not asked for"
+        elif helm.seen_armed and not armed:
+            why = "the autopilot was disarmed, not asked for"
+        elif failsafe and not helm.seen_failsafe:
+            why = "an autopilot failsafe is active (HEARTBEAT MAV_STATE_CRITICAL)"
+    helm = replace(helm, seen_mode=mode, seen_armed=armed, seen_failsafe=failsafe, asked_modes=asked)
+    if why is None:
+        return helm
+    out.events.append(Event("error", f"overridden: {why}; the executive commands nothing until an operator resumes"
+                                     " (MAV_CMD_MISSION_START or a mission upload)"))
+    return replace(helm, phase=Phase.OVERRIDDEN, overridden=why, activity=None, target_sent_s=None)
+
+
+def _mode_name(mode: int) -> str:
+    try:
+        return SubMode(mode).name
+    except ValueError:
+        return f"mode {mode}"
+
+
+def _ask_mode(helm: HelmState, mode: SubMode, now_s: float, out: _Out) -> HelmState:
+    """Send a mode request and remember it, so the change it brings is not taken for an override."""
+    out.commands.append(SetMode(mode))
+    asked = (*helm.asked_modes[-7:], (int(mode), now_s))
+    return replace(helm, mode_request_s=now_s, asked_modes=asked)
 
 
 def _rates(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:
@@ -284,11 +387,12 @@ def _setup(
 ) -> HelmState:
     if not vehicle.has_position:
         return helm
+    if helm.stop is not None:  # a safety stop that outlived a reboot or a restart: straight to it
+        return replace(helm, phase=Phase.SAFE, activity=None)
     if table is None:
         return replace(helm, phase=Phase.RUNNING)  # "no table" is handled there: surface
     if vehicle.mode != SubMode.GUIDED and _due(helm.mode_request_s, now_s, config.retry_s):
-        out.commands.append(SetMode(SubMode.GUIDED))  # refused until the position estimate exists
-        helm = replace(helm, mode_request_s=now_s)
+        helm = _ask_mode(helm, SubMode.GUIDED, now_s, out)  # refused until the position estimate exists
     if not vehicle.armed and _due(helm.arm_request_s, now_s, config.retry_s):
         out.commands.append(Arm(True))
         helm = replace(helm, arm_request_s=now_s)
@@ -300,6 +404,10 @@ def _setup(
 
 
 def _safety(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float) -> tuple[Situation, str] | None:
+    if (helm.phase is Phase.RUNNING and vehicle.position_s is not None
+            and now_s - vehicle.position_s > config.position_timeout_s):
+        return Situation.POSITION_LOST, (f"no plausible position for {now_s - vehicle.position_s:.0f} s"
+                                         f" (position_timeout_s {config.position_timeout_s:g})")
     if config.max_mission_time_s is not None and helm.mission_start_s is not None:
         elapsed = now_s - helm.mission_start_s
         if elapsed > config.max_mission_time_s:
@@ -312,6 +420,21 @@ def _safety(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: f
             and not inside(vehicle.lon_deg, vehicle.lat_deg, config.geofence)):
         return Situation.GEOFENCE, f"position {vehicle.lat_deg:.5f}, {vehicle.lon_deg:.5f} is outside the geofence"
     return None
+
+
+def _persisting(helm: HelmState, breach: tuple[Situation, str] | None, config: HelmConfig, now_s: float,
+               out: _Out) -> HelmState:
+    """Track how long a limit has been exceeded: one sample over a limit never fires it."""
+    if breach is None:
+        if helm.breach is not None:
+            out.events.append(Event("info", f"{helm.breach.value}: back within the limit before it fired"))
+        return replace(helm, breach=None, breach_since_s=None) if helm.breach is not None else helm
+    situation, text = breach
+    if helm.breach is situation:
+        return helm
+    if situation not in _AT_ONCE:
+        out.events.append(Event("warning", f"{text}: on_breach if it lasts {config.breach_window_s:g} s"))
+    return replace(helm, breach=situation, breach_since_s=now_s)
 
 
 def _breach(situation: Situation, vehicle: VehicleState, config: HelmConfig, now_s: float) -> Activity:
@@ -332,17 +455,32 @@ def _choose(
     """Pick the activity for this update; returns the new helm state and whether it changed."""
     current = helm.activity
     if helm.phase is Phase.SAFE:
-        return helm, False
+        if current is not None:
+            return helm, False
+        assert helm.stop is not None  # SAFE without an activity: a stop carried over a reboot, restart or resume
+        out.events.append(Event("error", f"safety stop ({helm.stop.value}) holds until an operator clears it"
+                                         f" (MAV_CMD_MISSION_START): on_breach {config.on_breach}"))
+        act = _breach(helm.stop, vehicle, config, now_s)
+        return replace(helm, activity=act, target_sent_s=None, mode_request_s=None), True
     breach = _safety(helm, vehicle, config, now_s)
-    if breach is not None:
+    helm = _persisting(helm, breach, config, now_s, out)
+    if breach is not None and (breach[0] in _AT_ONCE or helm.breach_since_s is not None
+                               and now_s - helm.breach_since_s >= config.breach_window_s):
         situation, text = breach
-        out.events.append(Event("error", f"{text}: on_breach {config.on_breach}, plan suspended"))
+        out.events.append(Event("error", f"{text}: on_breach {config.on_breach}, plan suspended until an operator"
+                                         " clears the safety stop (MAV_CMD_MISSION_START)"))
         act = _breach(situation, vehicle, config, now_s)
-        return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_request_s=None), True
+        return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_request_s=None, stop=situation,
+                       breach=None, breach_since_s=None), True
     if helm.phase is Phase.ARRIVED and current is not None:
         return helm, False
     lat, lon, depth = _position(vehicle)
     heading = vehicle.heading_deg if vehicle.heading_deg is not None else math.nan
+    if table is not None and not math.isfinite(heading):
+        # The table's action depends on the heading: none is decided without one (never a NaN taken as east).
+        new = Activity(situation=Situation.NO_HEADING, action=None, cell=None, mode=SubMode.ALT_HOLD,
+                       target=DepthTarget(depth), started_s=now_s)
+        return _switch(helm, current, new, out, "heading unknown: holding depth without thrust until it is known")
     if table is None:
         new = Activity(situation=Situation.NO_TABLE, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
         return _switch(helm, current, new, out, "no valid policy table: surfacing")
@@ -426,8 +564,7 @@ def _realise(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: 
         helm = replace(helm, arm_request_s=now_s)
     if vehicle.mode != act.mode:
         if _due(helm.mode_request_s, now_s, config.retry_s):
-            out.commands.append(SetMode(act.mode))
-            helm = replace(helm, mode_request_s=now_s)
+            helm = _ask_mode(helm, act.mode, now_s, out)
         return helm
     if act.target is not None and _due(helm.target_sent_s, now_s, config.refresh_s):
         out.commands.append(act.target)

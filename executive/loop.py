@@ -9,9 +9,9 @@ simulator speedup.
 
 Uploads arrive on the ground-station link (``gcs_link``) or through the
 autopilot: goals by the mission protocol (``executive.mission_protocol``), tables and
-forecasts by MAVLink FTP (``executive.ftp``). New tables, uploaded or planned onboard
-(``executive.replanner``), are checked (``executive.goal_tables``) and swapped in whole just
-before a decision; a refused one is logged and never replaces the running plan.
+forecasts by MAVLink FTP (``executive.ftp``). What becomes of them, and of the onboard
+planner's tables, is ``executive.plan_changes``: checked, then swapped in whole just before a
+decision, or refused with a reason and never replacing the running plan.
 """
 
 from __future__ import annotations
@@ -24,18 +24,21 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import durable, goal_tables, timeline
+from executive import durable, envelope, goal_tables, plausibility, timeline
 from executive import signing
 from executive.clock import VehicleClock
-from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, step, swapped
+from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, rebooted, resume_text, resumed, step
 from executive.latency import LatencyHistogram
+from executive.links import LinkGuard
 from executive.mission_protocol import addressed_to
+from executive.plan_changes import PlanChanges
 from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
-from executive.replanner import ForecastWatcher, PlanJob, PlanResult, Replanner
-from executive.state import Command, Event, LogLevelName, Phase, VehicleState
+from executive.replanner import ForecastWatcher, Replanner
+from executive.state import Command, Event, LogLevelName, Phase, Situation, VehicleState
 from executive.uploads import UploadQuota, Uploads
-from planner.contract.errors import LrauvError
+from planner.contract.errors import ExecutiveError
+from planner.contract.geodesy import BBox
 from planner.contract.table import PolicyTable
 
 _POLL_S = 0.05  # longest wait in select (wall); heartbeats and link checks run at least this often
@@ -56,6 +59,7 @@ class ExecConfig:
     max_vehicle_s: float | None = None
     autopilot_system: int = bridge.AUTOPILOT_SYSTEM
     gcs_link: str | None = None  # pymavlink address for the ground station (uploads), e.g. udpin:0.0.0.0:14551
+    gcs_client_timeout_s: float | None = 30.0  # wall s: a ground station silent this long gets no more replies
     mission_path: Path | None = None  # the mission YAML: needed to plan onboard
     watch_dir: Path | None = None  # new forecast files here trigger a replan
     work_dir: Path | None = None  # uploaded forecasts and onboard plans (default: beside the log)
@@ -64,6 +68,7 @@ class ExecConfig:
     signing: signing.SigningKey | None = None  # MAVLink 2 signing: required of uploads and commands, used on all we send
     state_dir: Path | None = None  # durable state for a restart (executive.durable): saved at start and every swap
     upload_quota: UploadQuota = field(default_factory=UploadQuota)  # files and bytes uploads may hold (executive.uploads)
+    coverage: BBox | None = None  # the mission's planning box: uploaded goals must lie in it (executive.envelope)
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,12 +93,12 @@ class RunSummary:
     message_p99_us: float | None = None  # including the MCAP writes
 
 
-class Executive:
+class Executive(PlanChanges):
     """Runs the helm against a live MAVLink link until told to stop or the mission ends."""
 
     def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *,
                  table_bytes: Mapping[int, bytes] | None = None,
-                 metadata: dict[str, dict[str, str]] | None = None) -> None:
+                 metadata: dict[str, dict[str, str]] | None = None, safety_stop: Situation | None = None) -> None:
         from pymavlink import mavutil  # transport classes only; encoding and parsing are the bridge's
 
         self.config = config
@@ -101,17 +106,27 @@ class Executive:
             table = goal_tables.single(table, on_arrival=config.helm.on_arrival)
         self.plan: MissionPlan | None = table
         self.helm_config = self._config_for(self.plan)
+        self.envelope = envelope.Envelope(max_depth_m=config.helm.max_depth_m, geofence=config.helm.geofence,
+                                          coverage=config.coverage)
+        for n, given in enumerate(() if self.plan is None else self.plan.tables):
+            reason = None if given is None else envelope.check_table(given, self.envelope)
+            if reason is not None:
+                raise ExecutiveError(f"the table of goal {n} is outside the mission's safety section: {reason}")
         # Signing (executive.signing): one stream table for both links, as ArduPilot's; refusals by verdict.
         self.streams = None if config.signing is None else signing.Streams(config.signing)
         self.signature_refusals: dict[signing.Verdict, int] = {}
         self._refusal_logs: dict[tuple[signing.Verdict, signing.Link], signing.RefusalLog] = {}
         self.conn = bridge.open_link(config.link, source_system=bridge.EXECUTIVE_SYSTEM,
                                      source_component=bridge.EXECUTIVE_COMPONENT)
+        self.link = LinkGuard(self.conn, config.autopilot_system)  # locked to the autopilot once heard
+        self.lockstep = False  # the autopilot asked for progress reports (a TIMESYNC request: a lockstep simulator)
+        self.progress_reports = 0  # lockstep reports sent (bridge.progress_report)
         self.mav = bridge.new_mav(self.conn, streams=self.streams, link_id=signing.LINK_ID_AUTOPILOT)
         self.gcs = None
         if config.gcs_link is not None:
             self.gcs = bridge.open_link(config.gcs_link, source_system=bridge.EXECUTIVE_SYSTEM,
-                                        source_component=bridge.EXECUTIVE_COMPONENT)
+                                        source_component=bridge.EXECUTIVE_COMPONENT,
+                                        client_timeout_s=config.gcs_client_timeout_s)
             self.gcs_mav = bridge.new_mav(self.gcs, streams=self.streams, link_id=signing.LINK_ID_GROUND_STATION)
         # UDP carries whole frames in each datagram: the parser starts afresh with each, so the tail of
         # a cut frame can never join the next datagram's bytes into a frame nobody sent (TCP is a stream).
@@ -119,7 +134,9 @@ class Executive:
         self._gcs_datagrams = self.gcs is not None and isinstance(self.gcs, mavutil.mavudp)
         self.clock = VehicleClock()
         self.vehicle = VehicleState()
-        self.helm = HelmState()
+        self.helm = HelmState(stop=safety_stop)  # a stop saved by the run before a restart holds (durable)
+        self.gate = plausibility.Gate()  # telemetry checks (executive.plausibility)
+        self.boot = plausibility.BootTime()
         # In the background (executive.log_writer): a full, slow or failing disk degrades the log, never control.
         self.recorder = Recorder(config.log_path, metadata=metadata or {}, background=True)
         self._last_time: dict[str, float] = {}
@@ -140,6 +157,7 @@ class Executive:
         self.timeline = timeline.Timeline()  # the slice of a time-varying plan the last decision used
         self._work_dir = config.work_dir or config.log_path.with_name(config.log_path.stem + "-work")
         self.uploads = Uploads(accept_goals=self._accept_goals, accept_file=self._accept_file,
+                               flying=self._flying, set_current=self._set_current,
                                refused=lambda what, why: self._refuse(self.clock.now_s(time.monotonic()), what, why,
                                                                       notify=False),
                                quota=config.upload_quota, forecast_dir=self._work_dir / "forecasts",
@@ -154,7 +172,8 @@ class Executive:
         # What the decision audit (planner.shore.replay.audit) needs to run the helm again: its settings,
         # the active goal and every table's exact bytes.
         self.recorder.metadata("helm", {"config": self.helm_config.to_json(),
-                                        "goal_index": str(self.plan.index if self.plan is not None else 0)})
+                                        "goal_index": str(self.plan.index if self.plan is not None else 0),
+                                        "safety_stop": "" if safety_stop is None else safety_stop.value})
         self._blobs: dict[int, bytes] = {}  # every table's exact bytes, for the durable state
         if self.plan is not None and self.plan.table is not None:
             blobs = table_bytes or {}
@@ -165,11 +184,6 @@ class Executive:
             self._save_state(0.0)
         else:
             self._event(0.0, Event("error", "no policy table: the vehicle will be surfaced"))
-
-    @property
-    def table(self) -> PolicyTable | None:
-        """The table in use: the active goal's."""
-        return None if self.plan is None else self.plan.table
 
     def _config_for(self, plan: MissionPlan | None) -> HelmConfig:
         goal = None if plan is None else plan.goal
@@ -217,19 +231,30 @@ class Executive:
     def _drain(self, wall: float) -> None:
         # Bounded, so that at high speedup a full socket cannot starve the heartbeat
         # (due every vehicle second) or the wall-time limit; at least one datagram per call.
+        # Then one lockstep report: everything from the autopilot up to this vehicle time is handled.
         deadline = wall + min(_DRAIN_BUDGET_S, self._wall_to_heartbeat(wall))
         while True:
             data = self.conn.recv()
             if not data:
-                return
+                break
+            if not self.link.admit(data):  # from elsewhere, or a repeat
+                self._warn_link()
+                if time.monotonic() >= deadline:
+                    break
+                continue
             t0 = time.perf_counter()
             try:
                 msgs = self.mav.parse_buffer(bytes(data) if not isinstance(data, bytes) else data) or []
             except Exception:  # pymavlink raises on some malformed frames even when robust
                 self._counts["bad"] += 1
                 msgs = []
+            if any(bridge.asks_for_progress(m, self.config.autopilot_system) for m in msgs):
+                self.lockstep = True  # answered by the report at the end of this burst
             if self._datagrams:
                 bridge.end_datagram(self.mav)
+                if (locked := self.link.lock_on(msgs)) is not None:
+                    self._log(self.recorder.log, self.clock.now_s(time.monotonic()), "info",
+                              f"autopilot link locked to {locked[0]}:{locked[1]}")
             wall = time.monotonic()
             for msg in msgs:
                 decided = self._on_message(msg, wall)
@@ -239,7 +264,8 @@ class Executive:
                 if decided:
                     self.message_cost.add(time.perf_counter() - t0)
             if wall >= deadline:
-                return
+                break
+        self._report_progress(time.monotonic())
 
     def _drain_gcs(self) -> None:
         """Ground-station traffic: uploads only, never a decision; bounded like ``_drain``."""
@@ -291,6 +317,9 @@ class Executive:
         return False
 
     def _upload_message(self, msg: Any, mav: Any, now_s: float) -> None:
+        if msg.get_type() == "COMMAND_LONG":
+            self._operator_command(msg, mav, now_s)
+            return
         try:
             replies = self.uploads.handle(msg, mav, time.monotonic())
         except Exception as exc:  # an upload must never stop the loop: count it, say it, go on
@@ -300,6 +329,26 @@ class Executive:
             return
         for reply in replies:
             self._send_on(mav, now_s, reply)
+
+    def _operator_command(self, msg: Any, mav: Any, now_s: float) -> None:
+        """COMMAND_LONG addressed to the executive: MAV_CMD_MISSION_START resumes (docs/executive.md, "Authority")."""
+        if not addressed_to(msg, bridge.EXECUTIVE_SYSTEM, bridge.EXECUTIVE_COMPONENT) or msg.target_system == 0:
+            return
+        peer = (msg.get_srcSystem(), msg.get_srcComponent())
+        if msg.command != bridge.MAV_CMD_MISSION_START:
+            self._send_on(mav, now_s, bridge.command_ack(mav, msg.command, bridge.MAV_RESULT_UNSUPPORTED, peer))
+            return
+        self._resume(now_s, clear_stop=True, source=f"MAV_CMD_MISSION_START from {peer[0]}/{peer[1]}")
+        self._send_on(mav, now_s, bridge.command_ack(mav, msg.command, bridge.MAV_RESULT_ACCEPTED, peer))
+
+    def _resume(self, now_s: float, *, clear_stop: bool, source: str) -> None:
+        """An operator's explicit go: logged in the words the decision audit looks for."""
+        text = resume_text(self.helm, clear_stop=clear_stop, source=source)
+        if text is None:
+            return
+        self.helm = resumed(self.helm, clear_stop=clear_stop)
+        self._event(now_s, Event("warning", text))
+        self._log(self._save_state, now_s)
 
     def _log(self, fn: Any, *args: Any, **kwargs: Any) -> None:
         self._later.append((fn, args, kwargs))
@@ -318,6 +367,12 @@ class Executive:
         self._counts["in"] += 1
         t_boot = bridge.time_boot_s(msg)
         mine = bridge.from_autopilot(msg, self.config.autopilot_system)
+        note: dict[str, Any] = {}  # what the checks made of the message, for its log record (the audit reads it)
+        if mine and t_boot is not None:
+            t_boot = self._stamp(t_boot, wall, note)
+            if t_boot is None:
+                self._log(self._record_rx, self.clock.now_s(wall), msg, note)
+                return False
         if mine and t_boot is not None and not self.clock.synced and self.vehicle.heartbeat_s is not None:
             # HEARTBEAT carries no time_boot_ms: one heard before the first timestamp was stamped
             # 0 s. Move it to the vehicle's time base, or an autopilot that booted more than the
@@ -326,15 +381,16 @@ class Executive:
         if mine and t_boot is not None and self.clock.observe(t_boot, wall):
             self._event(t_boot, Event("warning", "autopilot time went back: it rebooted; setting up again"))
             self.vehicle = VehicleState()
-            self.helm = HelmState()
+            self.helm = rebooted(self.helm)  # a safety stop or an override outlives the reboot
+            self.gate = plausibility.Gate()
             self._last_time.clear()
             self._unix_offset_s = None  # relative to the old boot: UTC is unknown until the next SYSTEM_TIME
         now_s = self.clock.now_s(wall)
         if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
             return False
-        self._log(self._record_rx, now_s, msg)
+        self._log(self._record_rx, now_s, msg, note)
         if not mine:
-            if kind in Uploads.MESSAGES:  # a ground station routed through the autopilot
+            if kind in Uploads.MESSAGES or kind == "COMMAND_LONG":  # a ground station routed through the autopilot
                 self._upload_message(msg, self.mav, now_s)
             return False
         if t_boot is not None:
@@ -342,7 +398,11 @@ class Executive:
                 self._counts["stale"] += 1  # reordered or duplicated datagram: never step back in time
                 return False
             self._last_time[kind] = t_boot
-        self.vehicle = bridge.apply(self.vehicle, msg, now_s)
+        screened = plausibility.screen(self.gate, self.vehicle, bridge.apply(self.vehicle, msg, now_s), kind,
+                                       self.helm_config.limits, t_boot)
+        self.gate, self.vehicle = screened.gate, screened.vehicle
+        for event in screened.events:
+            self._event(now_s, event)
         if kind == "SYSTEM_TIME":
             self._unix_offset_s = bridge.unix_offset_s(msg) or self._unix_offset_s
         if kind in ("COMMAND_ACK", "STATUSTEXT"):
@@ -357,8 +417,28 @@ class Executive:
             return kind in bridge.DECISION_MESSAGES
         return False
 
-    def _record_rx(self, now_s: float, msg: Any) -> None:
-        self.recorder.write(Topic.MAVLINK_RX, now_s, bridge.describe(msg))
+    def _record_rx(self, now_s: float, msg: Any, note: Mapping[str, Any] | None = None) -> None:
+        self.recorder.write(Topic.MAVLINK_RX, now_s, {**bridge.describe(msg), **(note or {})})
+
+    def _stamp(self, raw_s: float, wall: float, note: dict[str, Any]) -> float | None:
+        """The message's continuous vehicle time, or None when the checks drop it (``plausibility.stamp``)."""
+        last = max(self._last_time.values(), default=None)
+        stamped = plausibility.stamp(self.boot, raw_s, last_s=last,
+                                     expected_s=self.clock.now_s(wall) if self.clock.synced else None,
+                                     rate=self.clock.rate, wall_s=wall, limits=self.helm_config.limits)
+        first_doubt = stamped.verdict == "drop" and self.boot.doubts == 0
+        self.boot = stamped.boot
+        if stamped.boot.epoch_s:
+            note["epoch_s"] = stamped.boot.epoch_s
+        if stamped.text is not None and (stamped.verdict != "drop" or first_doubt):
+            self._event(self.clock.now_s(wall), Event("info" if stamped.verdict == "wrapped" else "warning",
+                                                      stamped.text if stamped.verdict != "drop"
+                                                      else f"message dropped: {stamped.text}"))
+        if stamped.verdict == "drop":
+            self._counts["bad"] += 1
+            note["rejected"] = stamped.text
+            return None
+        return stamped.time_s
 
     # -- decisions and output ---------------------------------------------------------------
 
@@ -372,7 +452,10 @@ class Executive:
         current = None if followed is None else followed.current
         tick = step(self.helm, self.vehicle, None if current is None else current.table, self.helm_config,
                     now_s=now_s, link_ok=link_ok)
+        stopped = tick.helm.stop is not None and tick.helm.stop is not self.helm.stop
         self.helm = tick.helm
+        if stopped:  # the stop must outlive a restart (durable): saved once this decision's commands are out
+            self._log(self._save_state, now_s)
         if followed is not None and tick.decision is not None:  # the log announces the slice decisions use
             self.timeline = followed.timeline
             for event in followed.events:
@@ -408,168 +491,6 @@ class Executive:
             return
         if self._arrival_s is None:
             self._arrival_s = now_s
-
-    # -- plan changes ---------------------------------------------------------------------
-
-    def _propose(self, plan: MissionPlan, note: dict[str, Any]) -> None:
-        """Queue ``plan`` to replace the running one at the next decision."""
-        self._pending = (plan, note)
-
-    def _base(self) -> MissionPlan | None:
-        return self._pending[0] if self._pending is not None else self.plan
-
-    def _swap(self, now_s: float) -> None:
-        assert self._pending is not None
-        new, note = self._pending
-        self._pending = None
-        old, old_table = self.plan, self.table
-        self.plan = new
-        self.helm_config = self._config_for(new)
-        reset = new.table is not old_table
-        if reset:
-            self.helm = swapped(self.helm)
-        if old is None or new.goals != old.goals:
-            self._arrival_s, self._asked_next = None, None  # a new mission
-        record = {"time_s": now_s, "reason": "swapped", **note, "goal_index": new.index,
-                  "on_arrival": self.helm_config.on_arrival, "helm_reset": reset,
-                  "previous": goal_tables.identity(old_table), **goal_tables.identity(new.table)}
-        if new.table is not None:
-            record["forecast"] = {"identity": new.table.forecast_identity, "time": new.table.forecast_time}
-            if new.table.time_varying:
-                record["slices"] = timeline.slices_record(new.table)
-        self.swaps.append(record)
-        self._log(self.recorder.write, Topic.POLICY, now_s, record)
-        self._log(self._save_state, now_s)  # after this decision's commands are out
-        prev = record["previous"]["table_crc32"]
-        self._event(now_s, Event("info", f"plan swapped ({note.get('source', '?')}): goal {new.index},"
-                                         f" table {prev} -> {record['table_crc32']}"))
-
-    def _refuse(self, now_s: float, what: str, reason: str, table: PolicyTable | None = None, *,
-                notify: bool = True) -> str:
-        record: dict[str, Any] = {"time_s": now_s, "reason": "refused", "refusal": f"{what}: {reason}"}
-        if table is not None:  # a file that is no table has no identity to log
-            record.update(goal_tables.identity(table))
-        self._log(self.recorder.write, Topic.POLICY, now_s, record)
-        event = Event("warning", f"refused {what}: {reason}; the running plan goes on")
-        if notify:
-            self._event(now_s, event)
-        else:  # the protocol has told the ground station itself
-            self._log(self.recorder.log, now_s, event.level, event.text)
-        return reason
-
-    def _accept_goals(self, goals: tuple[Any, ...]) -> str | None:
-        """Goals uploaded by the mission protocol: staged until the first goal has a table."""
-        now_s = self.clock.now_s(time.monotonic())  # goals is never empty: items_to_goals refuses that
-        base = self._base() or MissionPlan(goals=(), tables=())
-        if tuple(goals) == base.goals:  # the running goals again (lrauv upload sends them before tables)
-            self.staged = None
-            self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted: the running goals, kept"))
-            return None
-        staged = goal_tables.adopt(tuple(goals), base)
-        self._event(now_s, Event("info", f"mission of {len(goals)} goals accepted"))
-        if staged.table is not None:
-            self.staged = None
-            self._propose(staged, {"source": "uploaded mission"})
-        else:
-            self.staged = staged
-            if self.replanner is not None:
-                self._request_plan(now_s, 0, staged.goals[0], reason="uploaded mission")
-            else:
-                self._event(now_s, Event("info", "waiting for the table of goal 0 (MAVLink FTP /tables/)"))
-        return None
-
-    def _accept_file(self, path: str, data: bytes) -> str | None:
-        """A file uploaded by MAVLink FTP: a table (``*.lrpt``) or a forecast (``*.nc``)."""
-        now_s = self.clock.now_s(time.monotonic())
-        name = path.rsplit("/", 1)[-1]
-        if name.endswith(".nc"):
-            return self._accept_forecast(now_s, name, data)
-        if not name.endswith(".lrpt"):
-            return self._refuse(now_s, path, "expected a policy table (*.lrpt) or a forecast (*.nc)")
-        try:
-            table = PolicyTable.from_bytes(data, name=path)  # CRC, version and shape
-        except LrauvError as exc:
-            return self._refuse(now_s, path, str(exc))
-        return self._offer(now_s, table, data, {"source": f"upload {path}"})
-
-    def _offer(self, now_s: float, table: PolicyTable, data: bytes | None, note: dict[str, Any]) -> str | None:
-        """Check a new table against the staged mission, then the running one; queue it if it fits."""
-        what = f"table {table.crc32:08x}"
-        candidates = []
-        if self.staged is not None:
-            candidates.append(("staged", self.staged))
-        base = self._base()
-        if base is not None:
-            candidates.append(("running", base))
-        reasons = []
-        for which, plan in candidates:
-            verdict = goal_tables.check_table(table, plan)
-            if not verdict.accepted:
-                reasons.append(verdict.reason)
-                continue
-            assert verdict.goal_index is not None
-            new = goal_tables.with_table(plan, verdict.goal_index, table)
-            self._record_policy(table, data, "received", now_s=now_s)
-            if which == "staged":
-                if new.table is None:
-                    self.staged = new
-                    return None
-                self.staged = None
-                self._propose(new, {**note, "mission": "uploaded"})
-            else:
-                self._propose(new, note)
-            return None
-        if not candidates:
-            reasons.append("there is no mission to match it against")
-        return self._refuse(now_s, what, "; ".join(r for r in reasons if r), table)
-
-    def _accept_forecast(self, now_s: float, name: str, data: bytes) -> str | None:
-        if self.replanner is None:
-            return self._refuse(now_s, name, "this executive has no mission to plan onboard (lrauv exec --mission)")
-        try:
-            path = self.uploads.forecasts.add(name, data)
-        except OSError as exc:  # a full disk refuses the upload (FTP NAK), never the loop
-            return self._refuse(now_s, name, f"cannot store it in {self._work_dir}: {exc.strerror or exc}")
-        self._new_forecast(now_s, path, time.monotonic())
-        for old in self.uploads.prune_forecasts(keep={path, *self.replanner.forecasts},  # superseded ones go
-                                                plans=(self.plan, self._base(), self.staged)):
-            self._log(self.recorder.log, now_s, "info", f"superseded forecast {old.name} removed")
-        return None
-
-    def _new_forecast(self, now_s: float, path: Path, seen_wall: float) -> None:
-        self._latest_forecast = path
-        plan = self._base()
-        self._event(now_s, Event("info", f"new forecast {path.name}"))
-        if self.replanner is None or not self.config.replan_on_new_forecast or plan is None or plan.goal is None:
-            return
-        self._request_plan(now_s, plan.index, plan.goal, reason=f"new forecast {path.name}",
-                           seen_wall=seen_wall)
-
-    def _request_plan(self, now_s: float, index: int, goal: Any, *, reason: str,
-                      seen_wall: float | None = None) -> None:
-        assert self.replanner is not None
-        when = None
-        if self._unix_offset_s is not None:
-            when = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(now_s + self._unix_offset_s))
-        job = PlanJob(goal_index=index, goal=goal, forecast=self._latest_forecast, time_iso=when, reason=reason,
-                      requested_wall_s=seen_wall if seen_wall is not None else time.monotonic())
-        self.replanner.request(job)
-        self._last_plan_s = now_s
-        self._log(self.recorder.log, now_s, "info", f"planning goal {index} onboard ({reason})")
-
-    def _replan_done(self, now_s: float, result: PlanResult) -> None:
-        job = result.job
-        if result.error is not None or result.table_bytes is None:
-            self._refuse(now_s, f"onboard plan ({job.reason})", result.error or "no table")
-            return
-        try:
-            table = PolicyTable.from_bytes(result.table_bytes, name="onboard plan")
-        except LrauvError as exc:
-            self._refuse(now_s, f"onboard plan ({job.reason})", str(exc))
-            return
-        note = {"source": f"onboard plan ({job.reason})", "latency_s": round(result.latency_s, 3),
-                "plan_s": round(result.finished_wall_s - result.started_wall_s, 3)}
-        self._offer(now_s, table, result.table_bytes, note)
 
     def _send_command(self, now_s: float, cmd: Command) -> None:
         msg = bridge.encode(self.mav, cmd, time_boot_ms=int(now_s * 1000) & 0xFFFFFFFF,
@@ -630,7 +551,8 @@ class Executive:
             return
         try:
             durable.save(self.config.state_dir, self.plan, self._blobs, log_path=self.config.log_path,
-                         mission_path=self.config.mission_path)
+                         mission_path=self.config.mission_path,
+                         safety_stop=None if self.helm.stop is None else self.helm.stop.value)
         except OSError as exc:  # the mission goes on; a restart would resume from the last state saved
             self._event(now_s, Event("error", f"cannot save the state to {self.config.state_dir}: {exc.strerror or exc}"))
 
@@ -645,6 +567,7 @@ class Executive:
         now_s = self.clock.now_s(wall)
         healthy = self.helm.phase not in (Phase.SAFE, Phase.LINK_LOST)
         self._send(now_s, bridge.heartbeat(self.mav, healthy=healthy))
+        self._report_progress(wall)
         if self.gcs is not None:
             self._send_on(self.gcs_mav, now_s, bridge.heartbeat(self.gcs_mav, healthy=healthy))
         self._next_heartbeat_s = now_s + _HEARTBEAT_PERIOD_S
@@ -677,8 +600,23 @@ class Executive:
         At a simulator speedup a short stall of this process (a busy machine) spans many
         vehicle seconds; the heartbeat that would have ended the silence may be in the socket.
         """
-        ready, _, _ = select.select([self.conn.fd], [], [], 0)
-        return bool(ready)
+        waiting = self.link.input_waiting()  # datagrams from elsewhere are never a sign of the autopilot
+        self._warn_link()
+        return waiting
+
+    def _report_progress(self, wall: float) -> None:
+        """A lockstep report (``bridge.progress_report``) after each burst of autopilot input and each heartbeat,
+        once the autopilot has asked for one. Not logged: it paces a simulator and says nothing about the vehicle.
+        """
+        if self.lockstep:
+            self.mav.send(bridge.progress_report(self.mav, self.clock.now_s(wall)))
+            self.progress_reports += 1
+
+    def _warn_link(self) -> None:
+        wall = time.monotonic()
+        text = self.link.warning(wall)
+        if text is not None:
+            self._event(self.clock.now_s(wall), Event("warning", text))
 
     def _replanning(self, now_s: float, wall: float) -> None:
         if self.watcher is not None and wall >= self._next_watch_wall:

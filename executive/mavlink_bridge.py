@@ -12,6 +12,7 @@ signs what it sends and gives every message it decodes a ``signature`` verdict
 from __future__ import annotations
 
 import math
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -51,22 +52,104 @@ _SEVERITY = {"debug": mavlink.MAV_SEVERITY_DEBUG, "info": mavlink.MAV_SEVERITY_I
              "warning": mavlink.MAV_SEVERITY_WARNING, "error": mavlink.MAV_SEVERITY_ERROR}
 
 
-def open_link(address: str, *, source_system: int, source_component: int) -> Any:
+def open_link(address: str, *, source_system: int, source_component: int,
+              client_timeout_s: float | None = None) -> Any:
     """A pymavlink connection (``mavutil.mavlink_connection``) that speaks MAVLink 2 from its first frame.
 
     mavutil picks its dialect module from the ``MAVLINK20`` environment variable when it is
     imported; instead of setting that for the whole process, the connection gets a MAVLink 2
     encoder/parser of its own, and is marked as already switched so that mavutil's protocol
-    auto-detection leaves it (and the environment) alone.
+    auto-detection leaves it (and the environment) alone. UDP addresses (``udpin:``, ``udp:``,
+    ``udpout:``) give a ``UdpLink``: it knows each datagram's source, can be locked to one
+    peer, and (listening) replies only to clients heard within ``client_timeout_s`` wall seconds.
     """
     from pymavlink import mavutil
 
-    conn = mavutil.mavlink_connection(address, source_system=source_system, source_component=source_component)
+    kind, _, rest = address.partition(":")
+    if kind in ("udpin", "udp", "udpout"):
+        conn: Any = _udp_link_class()(rest, listen=kind != "udpout", source_system=source_system,
+                            source_component=source_component, client_timeout_s=client_timeout_s)
+    else:
+        conn = mavutil.mavlink_connection(address, source_system=source_system, source_component=source_component)
     conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
     conn.mav.robust_parsing = True
     conn.WIRE_PROTOCOL_VERSION = mavlink.WIRE_PROTOCOL_VERSION
     conn.first_byte = False
     return conn
+
+
+def _udp_link_class() -> type:
+    """``UdpLink``, defined on first use: mavutil is imported only when a link is opened (as in the loop),
+    after the process has chosen its MAVLink version (mavutil reads ``MAVLINK20`` when imported)."""
+    global _UDP_LINK
+    if _UDP_LINK is not None:
+        return _UDP_LINK
+    from pymavlink import mavutil
+
+    class UdpLink(mavutil.mavudp):
+        """pymavlink's UDP link with two safeguards for a link anyone on the network can reach.
+
+        * ``source``: the address of the last datagram read, so that the loop can lock the
+          autopilot link to the autopilot's address once heard (``lock``); once locked, a
+          listening link writes only to that address.
+        * Listening without a lock (the ground-station port), pymavlink's ``mavudp`` writes to
+          every address that ever sent a byte; here only to clients heard within
+          ``client_timeout_s`` wall seconds (None: no time-out), and a silent client is forgotten.
+        """
+
+        def __init__(self, device: str, *, listen: bool, source_system: int, source_component: int,
+                     client_timeout_s: float | None = None) -> None:
+            super().__init__(device, input=listen, source_system=source_system, source_component=source_component)
+            self.source: tuple[str, int] | None = None
+            self.locked: tuple[str, int] | None = None
+            self.client_timeout_s = client_timeout_s
+            self.heard: dict[tuple[str, int], float] = {}  # listening: client -> wall time (monotonic) last heard
+
+        def recv(self, n: int | None = None) -> bytes:
+            try:
+                data, addr = self.port.recvfrom(65535)
+            except (BlockingIOError, InterruptedError, ConnectionRefusedError):  # nothing to read (or an ICMP error)
+                return b""
+            self.source = addr
+            if self.udp_server and (self.locked is None or addr == self.locked):
+                self.heard[addr] = time.monotonic()
+            return data
+
+        def lock(self, address: tuple[str, int]) -> None:
+            self.locked = address
+
+        def peek_source(self) -> tuple[str, int] | None:
+            """The source address of the next datagram, left unread (None when there is none)."""
+            try:
+                _, addr = self.port.recvfrom(1, socket.MSG_PEEK)
+            except OSError:  # nothing waiting, or an ICMP error to be read by recv
+                return None
+            return addr
+
+        def recipients(self, wall_s: float) -> list[tuple[str, int]]:
+            """Listening: where a write goes now (clients silent longer than the time-out are forgotten)."""
+            if self.locked is not None:
+                return [self.locked]
+            limit = self.client_timeout_s
+            if limit is not None:
+                self.heard = {a: t for a, t in self.heard.items() if wall_s - t <= limit}
+            return list(self.heard)
+
+        def write(self, buf: bytes) -> None:
+            if not self.udp_server:
+                super().write(buf)
+                return
+            for addr in self.recipients(time.monotonic()):
+                try:
+                    self.port.sendto(buf, addr)
+                except OSError:  # buffer full or peer gone: UDP may drop
+                    pass
+
+    _UDP_LINK = UdpLink
+    return UdpLink
+
+
+_UDP_LINK: type | None = None
 
 
 def new_mav(sink: Any, *, system: int = EXECUTIVE_SYSTEM, component: int = EXECUTIVE_COMPONENT,
@@ -162,14 +245,17 @@ def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
         heading = v.heading_deg if msg.hdg == _UNKNOWN_HDG else (msg.hdg / 100.0) % 360.0
         depth_m = max(0.0, -msg.relative_alt / 1000.0)  # relative_alt is negative below the surface
         return VehicleState(msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, depth_m, heading, v.mode, v.armed,
-                            v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s, v.interval_acks)
+                            v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s, v.interval_acks,
+                            v.position_s, v.autopilot_failsafe)
     if kind == "ATTITUDE":
         return VehicleState(msg.time_boot_ms / 1000.0, v.lat_deg, v.lon_deg, v.depth_m, math.degrees(msg.yaw) % 360.0,
                             v.mode, v.armed, v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s,
-                            v.interval_acks)
+                            v.interval_acks, v.position_s, v.autopilot_failsafe)
     if kind == "HEARTBEAT":
         armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
-        return replace(vehicle, mode=int(msg.custom_mode), armed=armed, heartbeat_s=now_s)
+        # ArduPilot reports MAV_STATE_CRITICAL while one of its failsafes is active (GCS, battery, ...).
+        failsafe = msg.system_status == mavlink.MAV_STATE_CRITICAL
+        return replace(vehicle, mode=int(msg.custom_mode), armed=armed, heartbeat_s=now_s, autopilot_failsafe=failsafe)
     if kind == "EKF_STATUS_REPORT":
         return replace(vehicle, position_ok=bool(msg.flags & mavlink.EKF_POS_HORIZ_ABS))
     if kind == "BATTERY_STATUS":
@@ -230,6 +316,21 @@ def heartbeat(mav: mavlink.MAVLink, *, healthy: bool) -> Any:
     return mav.heartbeat_encode(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, status)
 
 
+def progress_report(mav: mavlink.MAVLink, vehicle_s: float) -> Any:
+    """TIMESYNC as a lockstep report: ``ts1`` the vehicle time (ns) up to which we have handled the autopilot.
+
+    A TIMESYNC request (``tc1`` = 0) is harmless to any autopilot: ArduPilot answers it with its
+    own clock (which the loop logs and otherwise ignores); ``vehicle_sim`` in lockstep does not step
+    its physics past this time plus its slack (docs/executive.md, "Lockstep with the simulator").
+    """
+    return mav.timesync_encode(0, max(0, round(vehicle_s * 1000.0)) * 1_000_000)
+
+
+def asks_for_progress(msg: Any, system: int = AUTOPILOT_SYSTEM) -> bool:
+    """A TIMESYNC request (``tc1`` = 0) from the autopilot: a lockstep simulator waiting for our report."""
+    return msg.get_msgId() == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0 and from_autopilot(msg, system)
+
+
 def statustext(mav: mavlink.MAVLink, event: Event) -> Any:
     text = event.text if len(event.text) <= _STATUSTEXT_LEN else event.text[: _STATUSTEXT_LEN - 3] + "..."
     return mav.statustext_encode(_SEVERITY[event.level], text.encode("ascii", "replace"))
@@ -257,3 +358,15 @@ def command_text(msg: Any) -> str:
         return f"COMMAND_ACK {cmd.name if cmd else msg.command}: {res.name if res else msg.result}"
     text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode("ascii", "replace")
     return f"autopilot: {text.rstrip(chr(0))}"
+
+
+# -- commands to the executive (docs/executive.md, "Authority") --------------------------
+
+MAV_CMD_MISSION_START = mavlink.MAV_CMD_MISSION_START  # an operator's explicit go: resume, clear the safety stop
+MAV_RESULT_ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+MAV_RESULT_UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
+
+
+def command_ack(mav: mavlink.MAVLink, command: int, result: int, peer: tuple[int, int]) -> Any:
+    """COMMAND_ACK for a command the executive received from ``peer`` (system, component)."""
+    return mav.command_ack_encode(command, result, 0, 0, peer[0], peer[1])

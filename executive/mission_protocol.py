@@ -53,7 +53,7 @@ from planner.contract.errors import LrauvError
 from planner.contract.waypoints import MAX_GOALS, MissionItem, MissionResult, to_e7
 
 __all__ = [
-    "RECEIVER_MESSAGES", "STATUSTEXT_LEN", "Ack", "Count", "Item", "MissionDownloader", "MissionReceiver",
+    "RECEIVER_MESSAGES", "STATUSTEXT_LEN", "Ack", "Count", "Item", "Current", "MissionDownloader", "MissionReceiver",
     "MissionResult", "MissionSender", "MissionType", "Outgoing", "Peer", "RequestItem", "RequestList", "StatusText",
     "addressed_to", "dispatch", "encode", "item_from_message", "status_chunks",
 ]
@@ -136,7 +136,15 @@ class StatusText:
     chunk_seq: int = 0
 
 
-Outgoing = Union[RequestItem, Ack, Count, Item, RequestList, StatusText]
+@dataclass(frozen=True)
+class Current:
+    """MISSION_CURRENT: the active item, the answer to MISSION_SET_CURRENT."""
+
+    peer: Peer
+    seq: int
+
+
+Outgoing = Union[RequestItem, Ack, Count, Item, RequestList, StatusText, Current]
 
 
 def status_chunks(text: str, *, chunk_id: int, severity: int = MAV_SEVERITY_WARNING) -> tuple[StatusText, ...]:
@@ -196,8 +204,12 @@ class MissionReceiver:
     """
 
     def __init__(self, accept: Callable[[tuple[MissionItem, ...]], str | None], *, items: Sequence[MissionItem] = (),
-                 item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = MAX_RETRIES, max_items: int = MAX_GOALS + 1) -> None:
+                 item_timeout_s: float = ITEM_TIMEOUT_S, retries: int = MAX_RETRIES, max_items: int = MAX_GOALS + 1,
+                 serve: Callable[[], tuple[MissionItem, ...]] | None = None,
+                 set_current: Callable[[int], str | None] | None = None) -> None:
         self._accept = accept
+        self._serve = serve
+        self._set_current = set_current
         self._items = tuple(items)
         self.item_timeout_s = item_timeout_s
         self.retries = retries
@@ -205,11 +217,28 @@ class MissionReceiver:
         self._upload: _Upload | None = None
         self._finished: _Finished | None = None  # to answer a re-sent last item whose ACK was lost
         self._text_id = 0
+        self._download: tuple[MissionItem, ...] | None = None
 
     @property
     def items(self) -> tuple[MissionItem, ...]:
-        """The accepted list, served for download."""
+        """The accepted list."""
         return self._items
+
+    def served(self) -> tuple[MissionItem, ...]:
+        """The list a download returns: what ``serve`` says is flown, else the accepted list."""
+        return self._items if self._serve is None else self._serve()
+
+    def on_set_current(self, peer: Peer, seq: int, now_s: float) -> tuple[Outgoing, ...]:
+        """MISSION_SET_CURRENT: the active item changes, answered with MISSION_CURRENT (or refused with STATUSTEXT)."""
+        if self._set_current is None:
+            return self._texts(f"MISSION_SET_CURRENT {seq} refused: not supported here")
+        try:
+            reason = self._set_current(seq)
+        except LrauvError as exc:
+            reason = str(exc)
+        if reason is not None:
+            return self._texts(f"MISSION_SET_CURRENT {seq} refused: {reason}")
+        return (Current(peer, seq),)
 
     def on_count(self, peer: Peer, count: int, mission_type: int, now_s: float) -> tuple[Outgoing, ...]:
         """MISSION_COUNT: start (or restart) an upload; a count of 0 clears."""
@@ -256,15 +285,17 @@ class MissionReceiver:
         """MISSION_REQUEST_LIST: answer with the count of the accepted list."""
         if mission_type != MissionType.MISSION:
             return (Ack(peer, MissionResult.UNSUPPORTED, mission_type),)
-        return (Count(peer, len(self._items)),)
+        self._download = self.served()  # the items of one download come from one list, however the plan moves on
+        return (Count(peer, len(self._download)),)
 
     def on_request(self, peer: Peer, seq: int, now_s: float, mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
         """MISSION_REQUEST_INT or MISSION_REQUEST during a download: the item, always as MISSION_ITEM_INT."""
         if mission_type != MissionType.MISSION:
             return (Ack(peer, MissionResult.UNSUPPORTED, mission_type),)
-        if not 0 <= seq < len(self._items):
+        items = self._download if self._download is not None else self.served()
+        if not 0 <= seq < len(items):
             return (Ack(peer, MissionResult.INVALID_SEQUENCE),)
-        return (Item(peer, self._items[seq]),)
+        return (Item(peer, items[seq]),)
 
     def on_ack(self, peer: Peer, result: int, mission_type: int, now_s: float) -> tuple[Outgoing, ...]:
         """MISSION_ACK: ends a download; an error from the uploading peer cancels its upload."""
@@ -303,8 +334,11 @@ class MissionReceiver:
 
     def _refuse(self, peer: Peer, result: MissionResult, reason: str,
                 mission_type: int = MissionType.MISSION) -> tuple[Outgoing, ...]:
+        return (*self._texts(f"mission refused: {reason}"), Ack(peer, result, mission_type))
+
+    def _texts(self, text: str) -> tuple[Outgoing, ...]:
         self._text_id = self._text_id % 65535 + 1
-        return (*status_chunks(f"mission refused: {reason}", chunk_id=self._text_id), Ack(peer, result, mission_type))
+        return status_chunks(text, chunk_id=self._text_id)
 
     def _judge(self, items: tuple[MissionItem, ...]) -> tuple[MissionResult, str]:
         """``accept``'s verdict; never raises: an exception from the hook is a refusal."""
@@ -511,6 +545,8 @@ def encode(mav: Any, out: Outgoing) -> Any:
         return mav.mission_count_encode(*out.peer, out.count, out.mission_type)
     if isinstance(out, RequestList):
         return mav.mission_request_list_encode(*out.peer, out.mission_type)
+    if isinstance(out, Current):
+        return mav.mission_current_encode(out.seq)
     if isinstance(out, StatusText):
         text = out.text.encode("utf-8")
         return mav.statustext_encode(out.severity, text[:_char_boundary(text, STATUSTEXT_LEN)], out.chunk_id,
@@ -547,7 +583,8 @@ def addressed_to(msg: Any, system: int, component: int) -> bool:
 
 
 RECEIVER_MESSAGES = frozenset({"MISSION_COUNT", "MISSION_ITEM_INT", "MISSION_ITEM", "MISSION_REQUEST_LIST",
-                               "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_CLEAR_ALL"})
+                               "MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK", "MISSION_CLEAR_ALL",
+                               "MISSION_SET_CURRENT"})
 """The messages ``dispatch`` feeds to a ``MissionReceiver`` (legacy MISSION_ITEM and MISSION_REQUEST included)."""
 
 
@@ -568,4 +605,6 @@ def dispatch(receiver: MissionReceiver, msg: Any, now_s: float, *, system: int, 
         return receiver.on_request(peer, int(msg.seq), now_s, mission_type)
     if kind == "MISSION_ACK":
         return receiver.on_ack(peer, int(msg.type), mission_type, now_s)
+    if kind == "MISSION_SET_CURRENT":
+        return receiver.on_set_current(peer, int(msg.seq), now_s)
     return receiver.on_clear_all(peer, mission_type, now_s)

@@ -23,6 +23,7 @@ class Phase(Enum):
     ARRIVED = "arrived"  # at a goal: on_arrival behaviour (hold, surface, drift)
     SAFE = "safe"  # a safety limit fired (time, battery, depth, geofence): on_breach, plan suspended
     LINK_LOST = "link_lost"  # no autopilot heartbeat within the timeout: ask for on_breach's mode
+    OVERRIDDEN = "overridden"  # a mode, disarm or failsafe the executive did not command: command nothing until resumed
 
 
 @unique
@@ -41,6 +42,8 @@ class Situation(Enum):
     TOO_DEEP = "too_deep"  # deeper than max_depth_m: on_breach
     GEOFENCE = "geofence"  # outside the mission's geofence: on_breach
     LINK_LOST = "link_lost"
+    POSITION_LOST = "position_lost"  # no plausible position for position_timeout_s: on_breach
+    NO_HEADING = "no_heading"  # the heading is unknown (NaN or missing samples): hold depth, no thrust
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +62,8 @@ class VehicleState:
     energy_used_wh: float | None = None
     heartbeat_s: float | None = None  # vehicle time of the last autopilot HEARTBEAT
     interval_acks: int = 0  # COMMAND_ACKs accepting MAV_CMD_SET_MESSAGE_INTERVAL so far
+    position_s: float | None = None  # vehicle time of the last position that passed the checks (executive.plausibility)
+    autopilot_failsafe: bool = False  # the autopilot's HEARTBEAT says MAV_STATE_CRITICAL: one of its failsafes is on
 
     @property
     def has_position(self) -> bool:

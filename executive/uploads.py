@@ -91,6 +91,8 @@ class Uploads:
 
     def __init__(self, *, accept_goals: Callable[[tuple[Any, ...]], str | None],
                  accept_file: Callable[[str, bytes], str | None], refused: Callable[[str, str], object],
+                 flying: Callable[[], tuple[Any, ...]] | None = None,
+                 set_current: Callable[[int], str | None] | None = None,
                  quota: UploadQuota = UploadQuota(), announce: Callable[[str], object] = lambda text: None,
                  forecast_dir: Path | None = None) -> None:
         self._accept_goals = accept_goals
@@ -99,7 +101,8 @@ class Uploads:
         self.ftp = FtpServer(accept=accept_file, max_files=quota.max_files, max_total_bytes=quota.max_bytes,
                              max_file_bytes=quota.max_bytes, announce=announce)
         self.forecasts = ForecastStore(forecast_dir or Path("forecasts"))
-        self.missions = mp.MissionReceiver(accept=self._accept_items)
+        # Downloads serve what the vehicle is flying (``flying``), not merely the last list accepted.
+        self.missions = mp.MissionReceiver(accept=self._accept_items, serve=flying, set_current=set_current)
         self._mav: Any = None  # the link of the last mission-protocol peer, for retries
 
     def _accept_items(self, items: tuple[mp.MissionItem, ...]) -> str | None:

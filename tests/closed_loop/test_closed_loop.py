@@ -17,7 +17,7 @@ from planner.contract.modes import SubMode
 from tests.support import REPO
 from tests.support.helpers import assert_audit_clean, start_west_of_goal, wait_until
 from tests.support.linkfault import Faults, LinkFaultProxy
-from tests.support.loop_rig import SPEEDUP, ExecThread, Sim
+from tests.support.loop_rig import FAILSAFE_SLACK_S, SPEEDUP, ExecThread, Sim
 
 pytestmark = pytest.mark.slow
 
@@ -47,7 +47,10 @@ def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
 
 def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan, synthetic_forecast, tmp_path):
     lon, lat = start_west_of_goal(demo_plan.table)
-    sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10")
+    # Lockstep with slack (docs/executive.md, "Lockstep with the simulator"): a lost step does not stall
+    # the simulator, and 1.5 s keeps the executive's heartbeats within ArduSub's 5 s failsafe.
+    sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10",
+              "--lockstep-slack-s", f"{FAILSAFE_SLACK_S:g}")
     relay = LinkFaultProxy(sim.port, speedup=SPEEDUP, seed=7, down=Faults(loss=0.25, duplicate=0.10, reorder=0.05))
     ex = None
     try:

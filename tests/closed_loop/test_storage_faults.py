@@ -27,7 +27,7 @@ from executive.state import Phase  # noqa: E402
 from planner.contract.mission import load_mission  # noqa: E402
 from planner.shore.ftp_client import put_file  # noqa: E402
 from tests.support.helpers import DEMO_MISSION, start_west_of_goal, wait_until  # noqa: E402
-from tests.support.live_rig import Live  # noqa: E402
+from tests.support.live_rig import Live, following  # noqa: E402
 from tests.support.loop_rig import ExecThread, Sim  # noqa: E402
 from tests.support.udp_relay import LossyRelay  # noqa: E402
 
@@ -137,11 +137,8 @@ def live(demo_plan, synthetic_forecast, tmp_path):
     table = demo_plan.table
     plan = goal_tables.MissionPlan(goals=load_mission(DEMO_MISSION).goals, tables=(table,))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table))
-    try:
-        assert rig.wait(rig.running), "the executive did not start following the plan"
+    with following(rig):
         yield rig
-    finally:
-        rig.stop()
 
 
 def test_a_sparse_write_is_refused_and_announced_and_superseded_forecasts_are_removed(live, tmp_path):

@@ -31,8 +31,7 @@ from planner.contract.settings import Goal  # noqa: E402
 from planner.contract.mission import goals_to_items  # noqa: E402
 
 from tests.support.helpers import DEMO_MISSION, plan_for, start_west_of_goal  # noqa: E402
-from vehicle_sim.autopilot import AutopilotSettings  # noqa: E402
-from tests.support.live_rig import Live  # noqa: E402
+from tests.support.live_rig import Live, following  # noqa: E402
 
 DEMO = DEMO_MISSION
 
@@ -49,11 +48,8 @@ def live(demo_plan, synthetic_forecast, tmp_path):
     mission = load_mission(DEMO)
     plan = goal_tables.MissionPlan(goals=mission.goals, tables=(table,))
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table), watch=tmp_path / "inbox")
-    try:
-        assert rig.wait(rig.running), "the executive did not start following the plan"
+    with following(rig):
         yield rig
-    finally:
-        rig.stop()
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +161,8 @@ def _events(log: Path) -> list[str]:
     return [payload["message"] for _topic, _t, payload in read_messages(log, ["/log"])]
 
 
-FAR_FENCE = ((-117.75, 33.60), (-117.70, 33.60), (-117.70, 33.65), (-117.75, 33.65))  # not around the vehicle
+# Around the goal only (a table whose goal is outside the fence is refused): the vehicle starts 3 cells west, outside.
+FAR_FENCE = ((-117.815, 33.385), (-117.785, 33.385), (-117.785, 33.415), (-117.815, 33.415))
 
 
 @pytest.mark.parametrize(("limits", "start_depth_m", "situation", "mode"), [
@@ -173,7 +170,8 @@ FAR_FENCE = ((-117.75, 33.60), (-117.70, 33.60), (-117.70, 33.65), (-117.75, 33.
     ({"geofence": FAR_FENCE, "on_breach": "drift"}, 0.0, "outside the geofence", SubMode.ALT_HOLD),
     ({"max_mission_time_s": 120.0}, 0.0, "exceeds max_mission_time_h", SubMode.SURFACE),
     ({"min_battery_pct": 99.8}, 0.0, "under min_battery_pct", SubMode.SURFACE),
-    ({"max_depth_m": 4.0, "on_breach": "hold"}, 8.0, "exceeds max_depth_m", SubMode.GUIDED),
+    # the demo table's layers reach 15 m: a tighter limit would refuse the table itself (executive.envelope)
+    ({"max_depth_m": 15.0, "on_breach": "hold"}, 18.0, "exceeds max_depth_m", SubMode.GUIDED),
 ])
 def test_each_safety_limit_fires_its_action_on_the_vehicle(demo_plan, synthetic_forecast, tmp_path, limits,
                                                            start_depth_m, situation, mode):
@@ -200,11 +198,9 @@ def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_for
     second = _plan(synthetic_forecast, second_goal) if second_table == "planned on shore" else None
     goals = (replace(mission.goals[0], on_arrival="next"), replace(mission.goals[0], goal=second_goal, on_arrival="hold"))
     plan = goal_tables.MissionPlan(goals=goals, tables=(first, second))
-    # The GCS heartbeat failsafe is the link-fault tests' subject. Here, at 1000x, its 5 vehicle seconds
-    # are 5 ms of wall time: on a busy machine planning onboard, a late heartbeat would surface the
-    # vehicle off the goal and make it reach it again, so this test turns it off (FS_GCS_ENABLE 0).
-    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0,
-               autopilot=AutopilotSettings(heartbeat_timeout_s=0.0))
+    # At 1000x the simulator's 5 s heartbeat failsafe is 5 ms of wall time; in lockstep (the rig's default)
+    # the vehicle waits for the executive, also while it plans goal 1 onboard, so it stays on.
+    rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0)
     summary = rig.join(120.0)
     assert summary.reached and rig.executive.plan.index == 1
     events = _events(tmp_path / "exec.mcap")

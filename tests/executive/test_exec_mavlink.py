@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 import os
-import threading
 import time
 from pathlib import Path
 
@@ -18,91 +17,24 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-from executive.helm import HelmConfig  # noqa: E402
-from executive.loop import ExecConfig, Executive  # noqa: E402
-from executive.recorder import read_messages  # noqa: E402
-from planner.contract.modes import SubMode  # noqa: E402
-from planner.contract.actions import Action  # noqa: E402
+from executive.helm import HelmConfig
+from executive.plausibility import Limits
+from executive.recorder import read_messages
+from planner.contract.actions import Action
+from planner.contract.modes import SubMode
+from tests.support.scripted_autopilot import Autopilot, Rig
 
 MAV = mavutil.mavlink
-
-
-class Autopilot:
-    """A scripted ArduSub-like peer: sends what ArduSub sends, returns what it receives."""
-
-    def __init__(self) -> None:
-        self.conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", source_system=1, source_component=1)
-        self.port = self.conn.port.getsockname()[1]
-        self.time_ms = 50_000
-        self.mode = SubMode.MANUAL
-        self.armed = False
-
-    def heartbeat(self) -> None:
-        base = MAV.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (MAV.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-        self.conn.mav.heartbeat_send(MAV.MAV_TYPE_SUBMARINE, MAV.MAV_AUTOPILOT_ARDUPILOTMEGA, base, int(self.mode),
-                                     MAV.MAV_STATE_ACTIVE)
-
-    def position(self, lat: float, lon: float, depth: float, heading: float, dt_ms: int = 200) -> None:
-        self.time_ms += dt_ms
-        self.conn.mav.global_position_int_send(self.time_ms, round(lat * 1e7), round(lon * 1e7), round(-depth * 1000),
-                                               round(-depth * 1000), 0, 0, 0, round(heading * 100) % 36000)
-
-    def expect(self, kind: str, *, timeout_s: float = 5.0, where=lambda m: True):  # type: ignore[no-untyped-def]
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            msg = self.conn.recv_match(blocking=True, timeout=0.1)
-            if msg is None:
-                continue
-            assert (msg.get_srcSystem(), msg.get_srcComponent()) == (1, 191)
-            self._obey(msg)
-            if msg.get_type() == kind and where(msg):
-                return msg
-        raise AssertionError(f"no {kind} from the executive within {timeout_s} s")
-
-    def _obey(self, msg) -> None:  # type: ignore[no-untyped-def]
-        """Mode and arming requests take effect, as on ArduSub (acknowledged, then in the next HEARTBEAT)."""
-        if msg.get_type() == "COMMAND_LONG":
-            if msg.command == MAV.MAV_CMD_DO_SET_MODE:
-                self.mode = SubMode(int(msg.param2))
-            elif msg.command == MAV.MAV_CMD_COMPONENT_ARM_DISARM:
-                self.armed = msg.param1 == 1
-            self.conn.mav.command_ack_send(msg.command, MAV.MAV_RESULT_ACCEPTED)
-            self.heartbeat()
-
-    def close(self) -> None:
-        self.conn.close()
-
-
-class Rig:
-    """The executive in a thread, connected to a scripted autopilot."""
-
-    def __init__(self, table, log_path: Path) -> None:  # type: ignore[no-untyped-def]
-        self.ap = Autopilot()
-        self.table = table
-        self.log_path = log_path
-        config = ExecConfig(link=f"udpout:127.0.0.1:{self.ap.port}", log_path=log_path,
-                            helm=HelmConfig(cruise_speed_m_s=1.0, on_arrival="hold"))
-        self.executive = Executive(config, table)
-        self._stop = threading.Event()
-        self.summary = None
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
-
-    def _run(self) -> None:
-        self.summary = self.executive.run(self._stop)
-
-    def stop(self):  # type: ignore[no-untyped-def]
-        self._stop.set()
-        self.thread.join(timeout=10)
-        assert not self.thread.is_alive()
-        return self.summary
+# The scripted autopilot moves the vehicle from state to state at once: no jump is implausible here.
+TELEPORTS = Limits(max_ground_speed_m_s=1e9, max_vertical_speed_m_s=1e9)
 
 
 @pytest.fixture()
 def rig(demo_plan, tmp_path: Path):
-    rig = Rig(demo_plan.table, tmp_path / "exec.mcap")
+    rig = Rig(demo_plan.table, tmp_path / "exec.mcap",
+              helm=HelmConfig(cruise_speed_m_s=1.0, on_arrival="hold", limits=TELEPORTS))
     try:
         rig.ap.expect("HEARTBEAT")  # the executive speaks first (udpout), so the autopilot learns its address
         yield rig

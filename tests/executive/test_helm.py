@@ -242,7 +242,15 @@ def test_link_loss_asks_for_surface_and_recovers(table):
 def test_safety_limits_surface_and_suspend_the_plan(table, config, vehicle_kw, situation):
     vehicle = _vehicle_at(table, _state_with(table, Action.FORWARD), **vehicle_kw)
     tick = _run(table, vehicle, config=config)
+    if situation is not Situation.MISSION_TIME:  # a reading over a limit fires it only once it lasts the window
+        assert tick.helm.phase is Phase.RUNNING and tick.decision.situation is Situation.FOLLOWING
+        assert [e.level for e in tick.events] == ["warning"]
+        t = 100.0 + config.breach_window_s
+        held = _run(table, replace(vehicle, time_s=t - 0.5), helm=tick.helm, now_s=t - 0.5, config=config)
+        assert held.helm.phase is Phase.RUNNING
+        tick = _run(table, replace(vehicle, time_s=t), helm=held.helm, now_s=t, config=config)
     assert tick.helm.phase is Phase.SAFE and tick.decision.situation is situation
+    assert tick.helm.stop is situation
     assert tick.commands == (SetMode(SubMode.SURFACE),)
     later = _run(table, replace(vehicle, mode=int(SubMode.SURFACE), time_s=200.0), helm=tick.helm, now_s=200.0, config=config)
     assert later.helm.phase is Phase.SAFE and later.commands == ()
@@ -303,7 +311,8 @@ def test_a_cell_is_left_only_a_margin_beyond_its_edge(table):
 def test_a_breach_does_what_on_breach_says(table, on_breach, mode, target):
     vehicle = _vehicle_at(table, _state_with(table, Action.FORWARD), depth_m=6.0)
     config = replace(CONFIG, max_depth_m=4.0, on_breach=on_breach)
-    tick = _run(table, replace(vehicle, mode=int(SubMode.MANUAL)), config=config)
+    too_deep_since = replace(RUNNING, breach=Situation.TOO_DEEP, breach_since_s=100.0 - config.breach_window_s)
+    tick = _run(table, replace(vehicle, mode=int(SubMode.MANUAL)), config=config, helm=too_deep_since)
     assert tick.helm.phase is Phase.SAFE and tick.decision.situation is Situation.TOO_DEEP
     assert tick.commands == (SetMode(mode),) and f"on_breach {on_breach}" in tick.events[0].text
     there = _run(table, replace(vehicle, mode=int(mode), time_s=101.0), helm=tick.helm, now_s=101.0, config=config)

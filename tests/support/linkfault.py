@@ -30,7 +30,10 @@ spike duration, time between spikes, outages, the times stamped on what the prox
 overhears) is in vehicle seconds. The proxy reads the vehicle's clock from the
 ``time_boot_ms`` of the simulator's telemetry as it arrives, before any fault is
 applied (the proxy stands next to the vehicle), and extrapolates between two
-timestamps at the nominal ``speedup`` (never going back). So a fault lasts the
+timestamps at the nominal ``speedup`` (never going back), by at most ``AHEAD_S`` (3 s)
+past the newest, or as far as the latest due time of a datagram it holds: a simulator
+in lockstep stops its clock while it waits for the executive, and the proxy's clock
+must not run on without it (what a latency spike holds is still released). So a fault lasts the
 vehicle time asked for even when the simulator falls behind its speedup on a loaded
 machine; converting with the nominal speedup alone would shorten it. Before the
 first timestamp, vehicle time is wall time since the proxy started times
@@ -66,6 +69,7 @@ _POLL_WALL_S = 0.02  # longest select wait (wall); also the resolution of spikes
 _VEHICLE_COMPONENT = 1  # the autopilot (MAV_COMP_ID_AUTOPILOT1)
 _EXECUTIVE_COMPONENT = 191  # MAV_COMP_ID_ONBOARD_COMPUTER
 _DO_SET_MODE = 176
+AHEAD_S = 3.0  # vehicle seconds the clock may run past the newest timestamp while nothing is held
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -244,7 +248,13 @@ class LinkFaultProxy:
         if self._clock_s is None:
             now = (wall - self._wall0) * self.speedup
         else:
-            now = self._clock_s + max(0.0, wall - self._clock_wall) * self.speedup
+            limit = AHEAD_S
+            for lane in self._lanes.values():
+                try:  # the latest due time of what a lane holds (the proxy's thread may empty it meanwhile)
+                    limit = max(limit, lane.queue[-1][0] - self._clock_s)
+                except IndexError:
+                    pass
+            now = self._clock_s + min(max(0.0, wall - self._clock_wall) * self.speedup, limit)
         self._now_s = max(self._now_s, now)
         return self._now_s
 

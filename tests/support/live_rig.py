@@ -1,9 +1,16 @@
-"""A simulated vehicle and an executive (with a ground-station link) in threads, over real UDP on ephemeral ports."""
+"""A simulated vehicle and an executive (with a ground-station link) in threads, over real UDP on ephemeral ports.
+
+The simulator runs in lockstep with the executive (``SimConfig.lockstep_slack_s``, slack 0 by
+default): it never steps past what the executive has handled, so a run does not depend on how
+busy the machine is (docs/executive.md, "Lockstep").
+"""
 
 from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -28,13 +35,15 @@ class Live:
     def __init__(self, forecast: Path, plan: goal_tables.MissionPlan, log: Path, *, start: tuple[float, float],
                  mission: Path | None = DEMO, watch: Path | None = None, exit_on_arrival: bool = False,
                  speedup: float = SPEEDUP, start_depth_m: float = 0.0, replan_period_s: float | None = None,
-                 signing=None, autopilot: AutopilotSettings | None = None, **helm) -> None:  # type: ignore[no-untyped-def]
+                 signing=None, autopilot: AutopilotSettings | None = None, lockstep_slack_s: float | None = 0.0,
+                 **helm) -> None:  # type: ignore[no-untyped-def]
         # The vehicle boots 6.5 h into the forecast, after issue 1's issue time (6 h): a newer
         # issue that arrives during the run is then one that exists at that time.
         self.sim = Simulator(World.load(forecast), SimConfig(start_lon_deg=start[0], start_lat_deg=start[1], port=0,
                                                              speedup=speedup, seed=3, start_offset_s=6.5 * 3600,
                                                              start_depth_m=start_depth_m,
-                                                             autopilot=autopilot or AutopilotSettings()))
+                                                             autopilot=autopilot or AutopilotSettings(),
+                                                             lockstep_slack_s=lockstep_slack_s))
         config = ExecConfig(link=f"udpout:127.0.0.1:{self.sim.port}", log_path=log, gcs_link="udpin:127.0.0.1:0",
                             mission_path=mission, watch_dir=watch, work_dir=log.parent / "work", max_wall_s=120.0,
                             exit_on_arrival=exit_on_arrival, linger_s=5.0, replan_period_s=replan_period_s,
@@ -81,3 +90,13 @@ class Live:
             self._audited = True
             assert_audit_clean(self.executive.config.log_path)
         return self.summary
+
+
+@contextmanager
+def following(rig: Live) -> Iterator[Live]:
+    """``rig`` once its executive follows the plan; stopped (and its log audited) at the end."""
+    try:
+        assert rig.wait(rig.running), "the executive did not start following the plan"
+        yield rig
+    finally:
+        rig.stop()

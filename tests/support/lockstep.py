@@ -4,9 +4,10 @@ The simulator steps its physics (``Simulator.step_once``) and sends what is due 
 127.0.0.1; the executive then handles every datagram waiting (``Executive._drain``) before the
 next step, and sends its heartbeat every vehicle second. Decisions run at the messages'
 ``time_boot_ms``, so when in vehicle time the vehicle does what does not depend on how fast the
-machine is (the closed-loop tests run the two sides free, as on a vehicle, and the executive's
-start-up there costs hundreds of vehicle seconds at 1000x). What is left of wall time, the
-set-up's retries timed by the extrapolated clock, moves the dive by a step or two (0.1 s).
+machine is. This is the single-threaded form of the simulator's own lockstep
+(``SimConfig.lockstep_slack_s``, docs/executive.md), which the closed-loop rigs use with the
+two sides in their own threads or processes; here one loop drives both, for tests that only
+need a dive and its log.
 """
 
 from __future__ import annotations

@@ -1,4 +1,8 @@
-"""The closed loop's two sides for the tests: ``lrauv sim`` as a child process, the executive in a thread."""
+"""The closed loop's two sides for the tests: ``lrauv sim`` as a child process, the executive in a thread.
+
+``lrauv sim`` runs in lockstep with the executive, as it does at any speedup above 1 (slack 0
+unless a test passes ``--lockstep-slack-s``): the loop does not depend on how busy the machine is.
+"""
 
 from __future__ import annotations
 
@@ -14,6 +18,10 @@ from vehicle_sim.cli import wait_ready
 
 LRAUV = [sys.executable, "-m", "planner.cli"]
 SPEEDUP = 400.0
+# Lockstep slack for a lossy link while the simulator's 5 s heartbeat failsafe is on: the executive's
+# heartbeats come every vehicle second of its clock, which may jump by up to the slack (telemetry lost)
+# and lag the vehicle by the slack, so 1 + 2 x slack + 0.5 (a step of telemetry) must stay under 5 s.
+FAILSAFE_SLACK_S = 1.5
 
 
 class Sim:

@@ -31,12 +31,22 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import timeline
+from executive import plausibility, timeline
 from planner.shore.replay.divelog import DiveLog, LogMessage
 from planner.shore.replay.summary import slices_text
-from executive.helm import HEARTBEAT_PHASES, Decision, HelmConfig, HelmState, step, swapped
+from executive.helm import (
+    HEARTBEAT_PHASES,
+    OPERATOR_RESUME,
+    Decision,
+    HelmConfig,
+    HelmState,
+    rebooted,
+    resumed,
+    step,
+    swapped,
+)
 from executive.recorder import LogError, Topic
-from executive.state import VehicleState
+from executive.state import Situation, VehicleState
 from planner.contract.errors import LrauvError
 from planner.contract.table import PolicyTable, TimeSlice
 
@@ -109,6 +119,7 @@ class _Audit:
     due: tuple[float, bool] | None = None  # a tick the loop ran here: (now_s, link_ok)
     swaps: int = 0
     unix_offset_s: float | None = None  # SYSTEM_TIME, as the loop holds it: UTC = vehicle time + offset
+    gate: plausibility.Gate = field(default_factory=plausibility.Gate)  # the telemetry checks' state
 
     def run_due(self) -> None:
         """Run the tick the last message called for.
@@ -149,14 +160,19 @@ class _Audit:
         p = m.payload
         if p.get("src_system") != self.autopilot_system or p.get("src_component") != bridge.AUTOPILOT_COMPONENT:
             return
+        if p.get("rejected") is not None:  # the loop's clock check dropped it (plausibility.stamp)
+            return
         msg = _Logged(p)
         kind = msg.get_type()
         t_boot = bridge.time_boot_s(msg)
         if t_boot is not None:
+            t_boot += float(p.get("epoch_s") or 0.0)  # time_boot_ms wraps (plausibility.WRAP_S)
             if t_boot < self.last_time.get(kind, -1.0):
                 return
             self.last_time[kind] = t_boot
-        self.vehicle = bridge.apply(self.vehicle, msg, m.log_time_s)
+        screened = plausibility.screen(self.gate, self.vehicle, bridge.apply(self.vehicle, msg, m.log_time_s), kind,
+                                       self.config.limits, t_boot)
+        self.gate, self.vehicle = screened.gate, screened.vehicle
         if kind == "SYSTEM_TIME":
             self.unix_offset_s = bridge.unix_offset_s(msg) or self.unix_offset_s
         if kind in _DECIDERS or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
@@ -211,6 +227,7 @@ def audit(dive: DiveLog) -> AuditResult:
         raise LogError(f"{dive.path}: no 'helm' metadata: this log predates the decision audit"
                        " (written by an executive without it); nothing to run again")
     config = HelmConfig.from_json(helm_meta["config"])
+    start = _start_helm(helm_meta, dive)
     tables = logged_tables(dive)
     state: _Audit | None = None
     start_index = int(helm_meta.get("goal_index", "0"))
@@ -220,13 +237,13 @@ def audit(dive: DiveLog) -> AuditResult:
         p = m.payload
         if m.topic is Topic.POLICY:
             if p["reason"] == "loaded" and state is None and p.get("goal_index", 0) == start_index:
-                state = _Audit(config=config, tables=tables, table=_table(tables, p, dive))
+                state = _Audit(config=config, tables=tables, table=_table(tables, p, dive), helm=start)
             elif p["reason"] == "swapped":
-                state = state or _Audit(config=config, tables=tables, table=None)
+                state = state or _Audit(config=config, tables=tables, table=None, helm=start)
                 state.swap(p)
             continue
         if state is None:
-            state = _Audit(config=config, tables=tables, table=None)  # the executive started without a table
+            state = _Audit(config=config, tables=tables, table=None, helm=start)  # the executive started without a table
         state.run_due()
         if m.topic is Topic.MAVLINK_RX:
             state.receive(m)
@@ -235,8 +252,10 @@ def audit(dive: DiveLog) -> AuditResult:
             if text.startswith(_LINK_LOST):
                 state.due = (m.log_time_s, False)
             elif text.startswith(_REBOOT):
-                state.vehicle, state.helm, state.last_time = VehicleState(), HelmState(), {}
-                state.unix_offset_s = None
+                state.vehicle, state.helm, state.last_time = VehicleState(), rebooted(state.helm), {}
+                state.unix_offset_s, state.gate = None, plausibility.Gate()
+            elif text.startswith(OPERATOR_RESUME):
+                state.helm = resumed(state.helm, clear_stop="safety stop" in text)
         elif m.topic is Topic.DECISION:
             compared += 1
             made = state.pending.pop(0) if state.pending else None
@@ -256,6 +275,17 @@ def audit(dive: DiveLog) -> AuditResult:
     varying = tuple(f"{crc}: {slices_text(timeline.slices_record(t))}" for crc, t in tables.items() if t.time_varying)
     return AuditResult(decisions=compared, mismatches=tuple(mismatches), tables=len(tables),
                        swaps=0 if state is None else state.swaps, timed=timed, time_varying=varying)
+
+
+def _start_helm(helm_meta: Mapping[str, str], dive: DiveLog) -> HelmState:
+    """The helm the executive started with: fresh, or holding the safety stop a restart carried over."""
+    stop = helm_meta.get("safety_stop") or None
+    if stop is None:
+        return HelmState()
+    try:
+        return HelmState(stop=Situation(stop))
+    except ValueError:
+        raise LogError(f"{dive.path}: metadata helm.safety_stop {stop!r} is not a known limit") from None
 
 
 def _table(tables: Mapping[str, PolicyTable], p: Mapping[str, Any], dive: DiveLog) -> PolicyTable:
