@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import durable, envelope, goal_tables, plausibility, timeline
+from executive import envelope, goal_tables, plausibility, timeline
 from executive import signing
 from executive.clock import VehicleClock
 from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, rebooted, resume_text, resumed, step
@@ -34,6 +34,7 @@ from executive.mission_protocol import addressed_to
 from executive.plan_changes import PlanChanges
 from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
+from executive.state_writer import StateWriter
 from executive.replanner import ForecastWatcher, Replanner
 from executive.state import Command, Event, LogLevelName, Phase, Situation, VehicleState
 from executive.uploads import UploadQuota, Uploads
@@ -175,6 +176,8 @@ class Executive(PlanChanges):
                                         "goal_index": str(self.plan.index if self.plan is not None else 0),
                                         "safety_stop": "" if safety_stop is None else safety_stop.value})
         self._blobs: dict[int, bytes] = {}  # every table's exact bytes, for the durable state
+        # Off the decision path (executive.state_writer): a slow or full disk never holds up a decision.
+        self.state_writer = None if config.state_dir is None else StateWriter(config.state_dir)
         if self.plan is not None and self.plan.table is not None:
             blobs = table_bytes or {}
             for index, table_n in enumerate(self.plan.tables):
@@ -220,6 +223,9 @@ class Executive(PlanChanges):
     def close(self) -> None:
         if self.replanner is not None:
             self.replanner.close()
+        if self.state_writer is not None:
+            for event in self.state_writer.close():
+                self._log(self.recorder.log, self.clock.now_s(time.monotonic()), event.level, event.text)
         self._write_later()
         self.recorder.close()
         self.conn.close()
@@ -546,15 +552,12 @@ class Executive(PlanChanges):
             self.recorder.attach(f"policy-{table.crc32:08x}.lrpt", table_bytes)
 
     def _save_state(self, now_s: float) -> None:
-        """The durable state (executive.durable): goals, tables and the active goal, for a restart."""
-        if self.config.state_dir is None or self.plan is None:
+        """The durable state (executive.durable): goals, tables, the active goal and the safety stop, for a restart."""
+        if self.state_writer is None or self.plan is None:
             return
-        try:
-            durable.save(self.config.state_dir, self.plan, self._blobs, log_path=self.config.log_path,
-                         mission_path=self.config.mission_path,
-                         safety_stop=None if self.helm.stop is None else self.helm.stop.value)
-        except OSError as exc:  # the mission goes on; a restart would resume from the last state saved
-            self._event(now_s, Event("error", f"cannot save the state to {self.config.state_dir}: {exc.strerror or exc}"))
+        self.state_writer.save(self.plan, self._blobs, log_path=self.config.log_path,
+                               mission_path=self.config.mission_path,
+                               safety_stop=None if self.helm.stop is None else self.helm.stop.value)
 
     # -- time-driven work --------------------------------------------------------------------
 
@@ -585,6 +588,8 @@ class Executive(PlanChanges):
         self._replanning(now_s, wall)
         self._write_later()
         for event in self.recorder.maybe_flush():  # the log's own health: degraded, writing again
+            self._event(now_s, event)
+        for event in [] if self.state_writer is None else self.state_writer.poll():
             self._event(now_s, event)
         cfg = self.config
         if cfg.exit_on_arrival and self._arrival_s is not None and now_s - self._arrival_s >= cfg.linger_s:

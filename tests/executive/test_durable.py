@@ -73,3 +73,26 @@ def _flip(path):  # type: ignore[no-untyped-def]
     data = bytearray(path.read_bytes())
     data[len(data) // 2] ^= 0xFF
     path.write_bytes(bytes(data))
+
+
+def test_a_state_that_cannot_be_saved_is_announced_and_control_goes_on(demo_plan, tmp_path):
+    """The saves run on a thread of their own (executive.state_writer): a failing one never stops a decision."""
+    from executive.recorder import Topic
+    from executive.state import Phase
+    from planner.shore.replay.divelog import open_dive
+    from tests.support.scripted_autopilot import Stepped
+
+    blocker = tmp_path / "not-a-directory"
+    blocker.write_text("a file where the state directory should go\n")
+    rig = Stepped(demo_plan.table, tmp_path / "exec.mcap", state_dir=blocker / "state")
+    try:
+        lat, lon = demo_plan.table.cell_centre(demo_plan.table.ny // 2, 2)
+        for _ in range(6):
+            rig.ap.heartbeat()
+            rig.ap.position(lat, lon, 0.0, 90.0, dt_ms=500)
+            rig.pump()
+        assert rig.executive._counts["decisions"] >= 5 and rig.executive.helm.phase is not Phase.WAIT_LINK
+    finally:
+        rig.close()
+    texts = [m.payload["message"] for m in open_dive(rig.log_path).messages([Topic.LOG])]
+    assert any(t.startswith(f"cannot save the state to {blocker / 'state'}") for t in texts), texts
