@@ -141,7 +141,7 @@ def test_the_mission_reaches_its_goal_through_a_faulty_link(demo_plan, synthetic
     alone it keeps ArduSub's 5 s failsafe, which must never fire.
     """
     table = demo_plan.table
-    lon, lat = start_west_of_goal(table)
+    lon, lat = start_west_of_goal(table, cells=2)  # two cells: thousands of faulty messages, a shorter suite
     track, log = tmp_path / "track.csv", tmp_path / "faulty.mcap"
     up, down = (LOSSY, LOSSY) if faults == "lossy both ways" else (Faults(**SPIKES), Faults())
     lossy = faults == "lossy both ways"
