@@ -222,8 +222,12 @@ def step(
         text = "link regained: setting up again" if regained else "autopilot heartbeat received"
         out.events.append(Event("info", text))
         # After a silence the executive cannot tell a failsafe that came and went from its own on_breach
-        # request: a failsafe still on is taken as the state it comes back to, not as a new override.
-        seen = replace(helm, seen_failsafe=vehicle.autopilot_failsafe) if regained else helm
+        # request: a failsafe still on is taken as the state it comes back to, not as a new override, and
+        # the on_breach mode counts as asked for (it was, every retry_s, however long the silence lasted).
+        # Requests start afresh, so the decision audit, which runs one tick of the silence, agrees.
+        seen = helm if not regained else replace(
+            helm, seen_failsafe=vehicle.autopilot_failsafe, mode_request_s=None, arm_request_s=None,
+            asked_modes=(*helm.asked_modes[-7:], (int(BREACH_MODE[config.on_breach]), now_s)))
         helm = replace(seen, phase=Phase.SETUP, rates_sent=False, rates_tries=0, activity=None, target_sent_s=None)
     helm = _authority(helm, vehicle, config, now_s, out)
     if helm.phase is Phase.OVERRIDDEN:

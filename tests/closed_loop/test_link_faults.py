@@ -174,7 +174,7 @@ def test_the_mission_reaches_its_goal_through_a_faulty_link(demo_plan, synthetic
     if faults == "lossy both ways":
         for c in (u, d):
             assert c.dropped > 300 and c.duplicated > 30 and c.reordered > 30, c
-            assert c.spikes >= 3 and c.delayed > 100, c
+            assert c.spikes >= 3 and c.delayed > 40, c  # a two-cell mission: about half the messages of a longer one
     else:
         assert u.dropped == d.dropped == 0 and d.spikes == 0 and d.delayed == 0
         assert failsafes == 0

@@ -237,7 +237,8 @@ def test_replanning_on_a_period(demo_plan, synthetic_forecast, tmp_path):
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table),
                replan_period_s=600.0)  # 3 s of wall time at 200x
     try:
-        assert rig.wait(lambda: len(rig.executive.swaps) >= 2, 60.0), rig.executive.swaps
+        # Each onboard plan is a child process: 40 s of wall time each on a busy 2-core machine.
+        assert rig.wait(lambda: len(rig.executive.swaps) >= 2, 300.0), rig.executive.swaps
     finally:
         rig.stop()
     assert [w["source"] for w in rig.executive.swaps[:2]] == ["onboard plan (period)"] * 2

@@ -13,7 +13,8 @@ class LossyRelay:
     """Forwards datagrams client <-> server, dropping a seeded share; ``heard`` sees each one from the client."""
 
     def __init__(self, server_port: int, *, drop: float = 0.0, seed: int = 0,
-                 heard: Callable[[bytes], None] = lambda data: None) -> None:
+                 heard: Callable[[bytes], None] = lambda data: None,
+                 droppable: Callable[[bytes], bool] = lambda data: True) -> None:
         self.front = bound_socket()  # the client's side
         self.back = bound_socket()  # the server's side
         self.port = self.front.getsockname()[1]
@@ -22,6 +23,7 @@ class LossyRelay:
         self.rng = random.Random(seed)
         self.forwarded = self.dropped = 0
         self._heard = heard
+        self._droppable = droppable  # which datagrams the seeded share is drawn from
         self._client: tuple[str, int] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -43,7 +45,7 @@ class LossyRelay:
                     self._pass(data, self.front, self._client)
 
     def _pass(self, data: bytes, sock: socket.socket, to: tuple[str, int]) -> None:
-        if self.drop and self.rng.random() < self.drop:
+        if self.drop and self._droppable(data) and self.rng.random() < self.drop:
             self.dropped += 1
         else:
             self.forwarded += 1
