@@ -32,18 +32,16 @@ from enum import Enum, IntEnum
 from pathlib import Path
 from typing import IO, Any, BinaryIO, Literal, Self, cast, get_args
 
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
-from mcap.records import Attachment, Channel, Chunk, DataEnd, Footer, Header, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
+from executive.log_records import BoundedRecords, LogError
 from executive.log_writer import Background, Flush, PendingFile, reason_of, spool_chunk_indexes
 from executive.state import Event
 from planner.contract.atomic import atomic_target
-from planner.contract.errors import ExecutiveError
 
-__all__ = ["LogError", "LogLevel", "RecordStream", "Recorder", "Recovery", "Topic", "check_head", "is_complete", "read_messages", "recover"]
+__all__ = ["LogError", "LogLevel", "Recorder", "Recovery", "Topic", "check_head", "is_complete", "read_messages", "recover"]
 
 _MAGIC = b"\x89MCAP0\r\n"  # MCAP spec, "Magic"
 _FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
@@ -58,10 +56,6 @@ _COMPRESSION = CompressionType.ZSTD
 # (16 bytes a message, uncompressed) but let readers skip chunks without a wanted topic.
 _INDEXES = IndexType.ALL
 _NS_PER_S = 1_000_000_000
-
-
-class LogError(ExecutiveError):
-    """An MCAP log that cannot be written, read or recovered; the message names the file."""
 
 
 # -- topics and schemas ------------------------------------------------------------------
@@ -678,7 +672,7 @@ class Recovery:
     last_log_time_s: float | None  # the latest (largest) log time recovered
     complete: bool  # the source already ended with a valid footer
     truncated_at_byte: int | None  # end of the last complete record, when the source was cut
-    chunks_dropped: int = 0  # complete chunk records whose contents failed CRC or decompression
+    chunks_dropped: int = 0  # complete chunk records whose contents failed CRC or decompression, or over the budget
 
 
 def _default_output(src: Path) -> Path:
@@ -688,8 +682,8 @@ def _default_output(src: Path) -> Path:
 def recover(src: str | os.PathLike[str], dst: str | os.PathLike[str] | None = None) -> Recovery:
     """Copy every complete record of a (possibly killed) log into a new, indexed MCAP file.
 
-    Reads ``src`` record by record and stops at the first record that is cut
-    off or unreadable; writes ``dst`` (default ``SRC.recovered.mcap``) atomically.
+    Reads ``src`` record by record (``executive.log_records``: chunks within a memory budget)
+    and stops at the first record that is cut off or unreadable; writes ``dst`` (default ``SRC.recovered.mcap``) atomically.
     """
     source = Path(src)
     output = _default_output(source) if dst is None else Path(dst)
@@ -711,55 +705,8 @@ def recover(src: str | os.PathLike[str], dst: str | os.PathLike[str] | None = No
     return Recovery(source=str(source), output=str(output), **result)
 
 
-class RecordStream:
-    """Every complete record of an MCAP file in file order, chunks opened, stopping at the first bad one.
-
-    Iterate it for Header, Schema, Channel, Message, Attachment and Metadata records
-    (the summary section after DataEnd is skipped: it only repeats schemas and
-    channels). Afterwards ``complete`` says whether the file ended with its footer and
-    closing magic, ``end_byte`` where the last complete record ended, and
-    ``chunks_dropped`` how many chunks failed their CRC or decompression.
-    """
-
-    def __init__(self, f: BinaryIO, size: int) -> None:
-        self._f = f
-        self._size = size
-        self.complete = False
-        self.end_byte = len(_MAGIC)
-        self.chunks_dropped = 0
-
-    def __iter__(self) -> Iterator[Any]:
-        # A record cannot be longer than the file: this bounds what a garbage length can
-        # make the reader allocate (foxglove/mcap #1220, MemoryError on truncated files).
-        records = StreamReader(self._f, emit_chunks=True, validate_crcs=True, record_size_limit=self._size).records
-        data_ended = False
-        while True:
-            try:
-                record = next(records)
-            except StopIteration:  # the closing magic was read after the footer
-                self.complete = True
-                return
-            except (McapError, ValueError, struct.error):
-                return  # cut off (EndOfFile), a garbage length, or a bad CRC: keep what came before
-            self.end_byte = self._f.tell()
-            if isinstance(record, DataEnd | Footer):
-                data_ended = True
-                continue
-            if data_ended:
-                continue
-            if isinstance(record, Chunk):
-                try:
-                    inner = breakup_chunk(record, validate_crc=True)
-                except Exception:  # noqa: BLE001 - untrusted bytes: any decompressor or parse error drops the chunk
-                    self.chunks_dropped += 1
-                    continue
-                yield from inner
-            else:
-                yield record
-
-
 def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[str, Any]:
-    stream = RecordStream(f, size)
+    stream = BoundedRecords(f, size, source, oversized="drop")
     writer: Writer | None = None
     schema_ids: dict[int, int] = {0: 0}
     channel_ids: dict[int, int] = {}
@@ -796,5 +743,5 @@ def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[s
         "last_log_time_s": None if last_ns is None else last_ns / _NS_PER_S,
         "complete": stream.complete,
         "truncated_at_byte": None if stream.complete else stream.end_byte,
-        "chunks_dropped": stream.chunks_dropped,
+        "chunks_dropped": len(stream.damaged_chunks),
     }

@@ -1,7 +1,7 @@
 """A dive's MCAP log opened for replay: what it holds, and its messages in the order they were written.
 
 The executive writes one log per run (``executive.recorder``). Replay reads it
-record by record (``planner.shore.replay.records``, within a memory budget)
+record by record (``executive.log_records``, within a memory budget)
 rather than through the index, so a log left by a killed writer replays up to its
 last complete record, and ``DiveLog`` says where it ends. Each payload is checked
 against its topic's schema as it is read (``planner.shore.replay.payloads``): a
@@ -28,7 +28,7 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata
 from executive.helm import HelmConfig
 from executive.recorder import LogError, Topic, check_head, is_complete
 from planner.shore.replay.payloads import PayloadError, check_fields, check_payload
-from planner.shore.replay.records import BoundedRecords
+from executive.log_records import BoundedRecords
 
 __all__ = ["DiveLog", "LogMessage", "open_dive"]
 

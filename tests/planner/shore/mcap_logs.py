@@ -8,7 +8,7 @@ from pathlib import Path
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import Writer
 
-from executive.recorder import RecordStream
+from executive.log_records import BoundedRecords
 
 
 def rewrite_log(src: Path, dst: Path, transform: Callable[[str, Message], bytes | None] = lambda t, m: m.data, *,
@@ -27,7 +27,7 @@ def rewrite_log(src: Path, dst: Path, transform: Callable[[str, Message], bytes 
         schemas: dict[int, int] = {0: 0}
         channels: dict[int, int] = {}
         extra_id = None
-        for r in RecordStream(f, src.stat().st_size):
+        for r in BoundedRecords(f, src.stat().st_size, src):
             if isinstance(r, Header):
                 writer = Writer(out, chunk_size=chunk_size)
                 writer.start(r.profile, r.library)

@@ -21,10 +21,10 @@ from mcap.data_stream import RecordBuilder
 from mcap.records import Attachment, Chunk, Message
 
 from executive.helm import HelmConfig
-from executive.recorder import RecordStream, Recorder, Topic
+from executive.recorder import Recorder, Topic, read_messages, recover
 from planner.cli import main as lrauv
 from planner.shore.replay.payloads import check_payload
-from planner.shore.replay.records import CHUNK_BUDGET_BYTES, BoundedRecords
+from executive.log_records import CHUNK_BUDGET_BYTES, BoundedRecords
 from tests.planner.shore.mcap_logs import rewrite_log
 
 _SHORT = 3000  # messages kept of the dive: past the first decisions, a fraction of the dive
@@ -264,7 +264,7 @@ def test_a_decompression_bomb_is_refused_before_it_is_decompressed(tmp_path, cap
     code, peak = _peak_bytes(lambda: lrauv(["replay", str(bomb)]))
     assert code == 2
     line = _one_error(capsys, bomb)
-    assert (f"declares {3 * 2 ** 30:,} bytes uncompressed, over replay's budget of {CHUNK_BUDGET_BYTES:,} bytes a chunk"
+    assert (f"declares {3 * 2 ** 30:,} bytes uncompressed, over the reader's budget of {CHUNK_BUDGET_BYTES:,} bytes a chunk"
             in line)
     assert peak < CHUNK_BUDGET_BYTES  # nothing of it was decompressed
 
@@ -280,13 +280,23 @@ def test_a_chunk_holding_more_than_it_declares_is_cut_at_what_it_declares(tmp_pa
     assert peak < CHUNK_BUDGET_BYTES  # decompression stopped one byte past the 64 KiB declared
 
 
-def test_the_bounded_reader_reads_what_the_recorders_reader_reads(dive_log):
-    def read(stream: Any) -> list[tuple[str, Any]]:
-        return [(type(r).__name__, r.data if isinstance(r, Message | Attachment) else getattr(r, "id", None))
-                for r in stream]
+def test_the_bounded_reader_reads_what_the_indexed_reader_reads(dive_log):
+    with open(dive_log, "rb") as f:
+        ours = BoundedRecords(f, dive_log.stat().st_size, dive_log)
+        messages = [r.data for r in ours if isinstance(r, Message)]
+        assert ours.complete and not ours.damaged_chunks
+    indexed = list(read_messages(dive_log))
+    assert len(messages) == len(indexed) > 1000
+    assert sorted(json.loads(m)["time_s"] for m in messages if b'"situation"' in m) == sorted(
+        p["time_s"] for t, _, p in indexed if t == Topic.DECISION.value)
 
-    with open(dive_log, "rb") as a, open(dive_log, "rb") as b:
-        size = dive_log.stat().st_size
-        ours, theirs = BoundedRecords(a, size, dive_log), RecordStream(b, size)
-        assert read(ours) == read(theirs)
-        assert ours.complete and theirs.complete and not ours.damaged_chunks
+
+def test_recovery_drops_a_bomb_unopened_and_keeps_the_rest(tmp_path):
+    """``lrauv log recover`` reads like replay: the 3 GiB chunk is dropped without decompressing it."""
+    bomb = _bombed_log(tmp_path / "bomb.mcap", declared=3 * 2 ** 30, holds=3 * 2 ** 30)
+    out = tmp_path / "fixed.mcap"
+    code, peak = _peak_bytes(lambda: lrauv(["log", "recover", str(bomb), str(out)]))
+    assert code == 0
+    assert peak < CHUNK_BUDGET_BYTES
+    assert [t for t, _, _ in read_messages(out)] == [Topic.DECISION.value]
+    assert recover(bomb, tmp_path / "again.mcap").chunks_dropped == 1

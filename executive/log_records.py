@@ -1,11 +1,12 @@
 """An MCAP file's records one at a time, its chunks opened within a memory budget.
 
-Replay reads files that may be cut, damaged or hostile. Like the recorder's
-``RecordStream`` it reads record by record (the index is not trusted), stops at
-the first record that is cut off or unreadable, and skips the summary section.
-Unlike it, it never decompresses what it has not budgeted for: a chunk declares
-its uncompressed size (MCAP spec, "Chunk"), and one that declares more than
-``CHUNK_BUDGET_BYTES`` is refused before a byte of it is decompressed. Within the
+Replay (``planner.shore.replay``) and ``lrauv log recover`` (``executive.recorder.recover``)
+read files that may be cut, damaged or hostile. Records are read one by one (the index is
+not trusted), reading stops at the first record that is cut off or unreadable, and the
+summary section is skipped. Nothing is decompressed that was not budgeted for: a chunk
+declares its uncompressed size (MCAP spec, "Chunk"), and one that declares more than
+``CHUNK_BUDGET_BYTES`` is refused (replay: the file is refused; recovery: the chunk is
+dropped) before a byte of it is decompressed. Within the
 budget, decompression stops at the declared size, so a chunk that holds more than
 it declares (a decompression bomb: 3 GB of zeros zstd-compress to about 100 kB)
 costs at most the budget. The records inside a chunk are yielded one by one, never
@@ -23,7 +24,7 @@ import struct
 import zlib
 from collections.abc import Generator, Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, Literal
 
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
@@ -31,9 +32,17 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Schema
 from mcap.stream_reader import StreamReader
 
-from executive.recorder import LogError
+from planner.contract.errors import ExecutiveError
 
-__all__ = ["CHUNK_BUDGET_BYTES", "BoundedRecords"]
+__all__ = ["CHUNK_BUDGET_BYTES", "BoundedRecords", "LogError", "Oversized"]
+
+
+class LogError(ExecutiveError):
+    """An MCAP log that cannot be written, read or recovered; the message names the file."""
+
+
+# What to do with a chunk that declares more than the budget: refuse the file, or drop the chunk.
+Oversized = Literal["refuse", "drop"]
 
 # The executive writes chunks of 64 KiB and `lrauv log recover` of 1 MiB (executive.recorder); mcap's
 # Python writer defaults to 1 MiB. 32 MiB leaves room for other writers and bounds what one chunk costs.
@@ -48,15 +57,18 @@ class BoundedRecords:
 
     Afterwards ``complete`` says whether the file ended with its footer and closing
     magic, ``end_byte`` where the last complete record ended, ``damaged_chunks`` the
-    byte offsets of the chunks that were damaged. Raises ``LogError`` (naming the file,
-    the chunk and the budget) for a chunk that declares more than the budget.
+    byte offsets of the chunks that were damaged or dropped. A chunk that declares more
+    than the budget raises ``LogError`` (naming the file, the chunk and the budget) with
+    ``oversized="refuse"``, and is dropped unopened with ``oversized="drop"``.
     """
 
-    def __init__(self, f: BinaryIO, size: int, path: Path, *, chunk_budget_bytes: int = CHUNK_BUDGET_BYTES) -> None:
+    def __init__(self, f: BinaryIO, size: int, path: Path, *, chunk_budget_bytes: int = CHUNK_BUDGET_BYTES,
+                 oversized: Oversized = "refuse") -> None:
         self._f = f
         self._size = size
         self._path = path
         self._budget = chunk_budget_bytes
+        self._oversized = oversized
         self.complete = False
         self.end_byte = _MAGIC_BYTES
         self.damaged_chunks: list[int] = []
@@ -87,9 +99,12 @@ class BoundedRecords:
 
     def _chunk(self, chunk: Chunk, start: int) -> Iterator[Schema | Channel | Message]:
         declared = chunk.uncompressed_size
+        if declared > self._budget and self._oversized == "drop":
+            self.damaged_chunks.append(start)
+            return
         if declared > self._budget:
             raise LogError(f"{self._path}: the chunk at byte {start:,} declares {declared:,} bytes uncompressed, over"
-                           f" replay's budget of {self._budget:,} bytes a chunk; refused without decompressing it"
+                           f" the reader's budget of {self._budget:,} bytes a chunk; refused without decompressing it"
                            " (a damaged or hostile file: the executive writes chunks of 64 KiB)")
         data = _decompress(chunk, declared)
         if data is None or (chunk.uncompressed_crc != 0 and zlib.crc32(data) != chunk.uncompressed_crc):
