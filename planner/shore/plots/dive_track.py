@@ -1,0 +1,342 @@
+"""The map of a logged dive (``track.png`` of ``lrauv replay --report``): the track coloured by the action decided.
+
+Drawn from a ``planner.shore.replay.dive.Dive``, the first table the track used
+(land and goal cells) and, when the planning forecast was found, the plan made
+again from it (``planner.shore.replay.nominal.plan_again``): its currents and the
+nominal path. A long dive (the demo log has 132,207 decisions) is thinned for
+drawing: the track becomes one polyline per run of one action, with at most a
+few thousand points in all.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.contract.actions import Action
+from planner.contract.errors import LrauvError
+from planner.grid import Grid
+from planner.shore.plots.map_axes import cell_edges, cos_lat, draw_land, draw_outline, geo_axes
+from planner.shore.plots.style import (
+    ACTION_COLORS,
+    FLOW_ARROW_COLOR,
+    GOAL_COLOR,
+    LAND_COLOR,
+    START_COLOR,
+    WATER_COLOR,
+    action_label,
+    load_matplotlib,
+    new_figure,
+    nice_speed,
+    save_png,
+)
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from planner.contract.table import PolicyTable
+    from planner.pipeline import PlanResult
+    from planner.shore.replay.dive import Dive, Track
+
+__all__ = [
+    "MAX_TRACK_POINTS",
+    "NEED_FORECAST",
+    "NOT_FOLLOWING_COLOR",
+    "OTHER_ACTION_COLOR",
+    "ActionRun",
+    "TrackSegment",
+    "action_color",
+    "action_name",
+    "action_order",
+    "action_runs",
+    "plot_dive_track",
+    "track_segments",
+]
+
+NOT_FOLLOWING_COLOR = "#3b3b3b"  # safe behaviours (action None): near black, unlike any action colour
+OTHER_ACTION_COLOR = "#b15928"  # an action name this version does not know
+MAX_TRACK_POINTS = 4000  # points drawn on the map, all runs together (about)
+_MAX_CURRENT_ARROWS_PER_AXIS = 28
+_DRAWN_ACTIONS = (Action.FORWARD, Action.FORWARD_LEFT, Action.FORWARD_RIGHT, Action.DRIFT, Action.ROTATE_LEFT,
+                  Action.ROTATE_RIGHT, Action.UP, Action.DOWN, Action.AT_GOAL, Action.UNREACHABLE)
+NEED_FORECAST = "the planning forecast (pass --forecast)"
+
+# --------------------------------------------------------------------------- runs and segments
+
+
+@dataclass(frozen=True, slots=True)
+class ActionRun:
+    """Consecutive rows ``start .. stop - 1`` that logged the same action (None: not following the table)."""
+
+    start: int
+    stop: int
+    action: str | None
+
+
+def action_runs(actions: Sequence[str | None]) -> list[ActionRun]:
+    """Split ``actions`` into runs of equal consecutive values, in order; empty input gives no run."""
+    runs: list[ActionRun] = []
+    start = 0
+    for n in range(1, len(actions) + 1):
+        if n == len(actions) or actions[n] != actions[start]:
+            runs.append(ActionRun(start, n, actions[start]))
+            start = n
+    return runs
+
+
+@dataclass(frozen=True, eq=False, slots=True)
+class TrackSegment:
+    """One polyline of the drawn track: the track rows it passes through, in order, and their action."""
+
+    action: str | None
+    rows: NDArray[np.int64]  # indices into the Track; the last is the next run's first row, if any
+
+
+def track_segments(track: Track, *, max_points: int = MAX_TRACK_POINTS) -> list[TrackSegment]:
+    """The track as one polyline per run of one action, thinned to about ``max_points`` points.
+
+    Rows without a position (NaN) are left out. Each run keeps its first and
+    last rows and, evenly spaced, rows between them; its polyline goes on to the
+    next run's first row, so the line has no gaps and the stretch between two
+    decisions has the colour of the earlier one (the action held until the next
+    decision). A dive with more than ``max_points / 2`` runs (one that switches
+    on nearly every decision) is thinned evenly first and its runs are found
+    among the rows kept, so that the number of points stays bounded.
+    """
+    rows = np.flatnonzero(np.isfinite(track.lat_deg) & np.isfinite(track.lon_deg)).astype(np.int64)
+    if rows.size == 0:
+        return []
+    limit = max(2, int(max_points))
+    runs = action_runs([track.action[r] for r in rows])
+    keep = np.zeros(rows.size, dtype=bool)
+    keep[:: max(1, math.ceil(rows.size / limit))] = True
+    keep[-1] = True
+    if 2 * len(runs) <= limit:
+        for run in runs:
+            keep[run.start] = keep[run.stop - 1] = True
+    else:
+        rows = rows[keep]
+        keep = np.ones(rows.size, dtype=bool)
+        runs = action_runs([track.action[r] for r in rows])
+    kept = np.flatnonzero(keep)
+    segments = []
+    for run in runs:
+        lo, hi = np.searchsorted(kept, [run.start, run.stop])
+        segments.append(TrackSegment(run.action, rows[kept[lo:hi + 1]]))
+    return segments
+
+
+def _goal_mask(table: PolicyTable) -> tuple[int, NDArray[np.bool_]] | None:
+    """Goal layer and the goal cells of that layer (spec section 6: water within ``goal_radius`` cells, Chebyshev)."""
+    cell = table.locate(table.goal_lat_deg, table.goal_lon_deg, table.goal_depth_m)
+    if cell is None:
+        return None
+    l, jg, ig = cell
+    r = table.goal_radius_cells
+    jj, ii = np.meshgrid(np.arange(table.ny), np.arange(table.nx), indexing="ij")
+    return l, (np.maximum(np.abs(ii - ig), np.abs(jj - jg)) <= r) & table.water[l]
+
+
+# --------------------------------------------------------------------------- track.png
+
+
+def action_color(action: str | None) -> str:
+    if action is None:
+        return NOT_FOLLOWING_COLOR
+    try:
+        return ACTION_COLORS[Action[action]]
+    except KeyError:
+        return OTHER_ACTION_COLOR
+
+
+def action_name(action: str | None) -> str:
+    if action is None:
+        return "not following (safe behaviour)"
+    try:
+        return action_label(Action[action])
+    except KeyError:
+        return action
+
+
+def action_order(actions: Sequence[str | None]) -> list[str | None]:
+    """The distinct actions of ``actions`` in legend order: table actions, then None, then unknown names."""
+    present = set(actions)
+    order: list[str | None] = [a.name for a in _DRAWN_ACTIONS if a.name in present]
+    if None in present:
+        order.append(None)
+    order += sorted(a for a in present if a is not None and a not in order)
+    return order
+
+
+def _start_state(track: Track, rows: NDArray[np.bool_]) -> tuple[int, int, int, int] | None:
+    """The first table state among ``rows`` (a mask), or None."""
+    valid = np.flatnonzero(rows & np.all(track.cell >= 0, axis=1))
+    if valid.size == 0:
+        return None
+    l, j, i, k = (int(x) for x in track.cell[valid[0]])
+    return (l, j, i, k)
+
+
+def plot_dive_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: PlanResult | None,
+                plan_rows: NDArray[np.bool_], path: Path) -> tuple[str, str]:
+    """Draw ``track.png``; returns its caption and what is missing from it ('' when nothing)."""
+    from planner.shore.replay.nominal import nominal_from
+
+    track = dive.track
+    grid = Grid(lon_deg=table.lon_deg, lat_deg=table.lat_deg, depth_m=np.asarray(table.depth_m))
+    valid = np.flatnonzero(np.isfinite(track.lat_deg) & np.isfinite(track.lon_deg))
+    missing = []
+    nominal = None
+    if plan is not None:
+        start = _start_state(track, plan_rows)
+        if start is None:
+            missing.append("the nominal path (no decision under the planned table had a table state)")
+        else:
+            try:
+                nominal = nominal_from(plan, start)
+            except LrauvError as exc:
+                missing.append(f"the nominal path ({exc})")
+    else:
+        missing.append("currents")
+        missing.append("the nominal path")
+    xs = [track.lon_deg[valid]] + [np.array([t.goal_lon_deg]) for t in goals]
+    ys = [track.lat_deg[valid]] + [np.array([t.goal_lat_deg]) for t in goals]
+    if nominal is not None:
+        xs.append(nominal.lon_deg)
+        ys.append(nominal.lat_deg)
+    radius = max(t.goal_radius_cells for t in goals)
+    extent = _map_extent(grid, np.concatenate(xs), np.concatenate(ys), margin_cells=radius + 2.5)
+    mpl = load_matplotlib()
+    width = 7.2
+    ratio = (extent[3] - extent[2]) / ((extent[1] - extent[0]) * cos_lat(grid))
+    fig = new_figure(mpl, width + 0.8, float(np.clip(width * ratio, 3.0, 8.5)) + 2.0)
+    ax = fig.subplots()
+    ax.set_facecolor(WATER_COLOR)
+    draw_land(mpl, ax, grid, ~table.water[0])
+    handles: list[Any] = []
+
+    if plan is not None:
+        quiver = _draw_plan_currents(mpl, ax, plan, extent)
+        if quiver is not None:
+            key = nice_speed(0.5 * float(np.nanpercentile(np.hypot(plan.u_m_s[0], plan.v_m_s[0]), 98)))
+            ax.quiverkey(quiver, 0.86, 1.012, key, f"{key:g} m/s", labelpos="E", coordinates="axes", color="0.3",
+                         fontproperties={"size": 8})
+            handles.append(mpl.lines.Line2D([], [], color=FLOW_ARROW_COLOR, marker=r"$\rightarrow$", linestyle="none",
+                                            markersize=12, label=f"current at {plan.grid.depth_m[0]:g} m (forecast)"))
+
+    segments = track_segments(track)
+    lines = [np.column_stack([track.lon_deg[s.rows], track.lat_deg[s.rows]]) for s in segments if s.rows.size > 1]
+    colors = [action_color(s.action) for s in segments if s.rows.size > 1]
+    # A white casing under the coloured line keeps it readable over arrows and land.
+    ax.add_collection(mpl.collections.LineCollection(lines, colors="white", linewidths=4.2, zorder=5,
+                                                     capstyle="round", joinstyle="round"))
+    ax.add_collection(mpl.collections.LineCollection(lines, colors=colors, linewidths=2.4, zorder=6,
+                                                     capstyle="round", joinstyle="round"))
+    for a in action_order([s.action for s in segments]):
+        handles.append(mpl.lines.Line2D([], [], color=action_color(a), linewidth=3.0, label=action_name(a)))
+
+    if nominal is not None:
+        ax.plot(nominal.lon_deg, nominal.lat_deg, color="black", linewidth=1.3, linestyle=(0, (4, 2.5)),
+                marker="o", markersize=2.5, zorder=7)
+        handles.append(mpl.lines.Line2D([], [], color="black", linewidth=1.3, linestyle=(0, (4, 2.5)),
+                                        marker="o", markersize=2.5, label="nominal path from the first decision's cell"))
+
+    for t in goals:
+        goal = _goal_mask(t)
+        if goal is not None:
+            draw_outline(mpl, ax, grid, goal[1], color=GOAL_COLOR, linewidth=2.0)
+        ax.plot(t.goal_lon_deg, t.goal_lat_deg, linestyle="none", marker="*", markersize=16,
+                markerfacecolor=GOAL_COLOR, markeredgecolor="black", markeredgewidth=1.0, zorder=9)
+    handles.append(mpl.lines.Line2D([], [], linestyle="none", marker="*", markersize=13, markerfacecolor=GOAL_COLOR,
+                                    markeredgecolor="black", label="goal" if len(goals) == 1 else "goals"))
+    handles.append(mpl.lines.Line2D([], [], color=GOAL_COLOR, linewidth=2.0,
+                                    label=f"goal cells (within {radius} cell{'s' if radius != 1 else ''})"))
+
+    i0, i1 = int(valid[0]), int(valid[-1])
+    ax.plot(track.lon_deg[i0], track.lat_deg[i0], linestyle="none", marker="o", markersize=10,
+            markerfacecolor=START_COLOR, markeredgecolor="black", markeredgewidth=1.1, zorder=10)
+    ax.plot(track.lon_deg[i1], track.lat_deg[i1], linestyle="none", marker="s", markersize=7,
+            markerfacecolor="white", markeredgecolor="black", markeredgewidth=1.3, zorder=10)
+    handles.insert(0, mpl.lines.Line2D([], [], linestyle="none", marker="o", markersize=8, markerfacecolor=START_COLOR,
+                                       markeredgecolor="black", label="start (first decision)"))
+    handles.insert(1, mpl.lines.Line2D([], [], linestyle="none", marker="s", markersize=6, markerfacecolor="white",
+                                       markeredgecolor="black", label="end of the log"))
+    half_x, half_y = 0.5 * table.dlon_deg, 0.5 * table.dlat_deg  # cells that reach into the map
+    in_view = np.ix_((table.lat_deg + half_y > extent[2]) & (table.lat_deg - half_y < extent[3]),
+                     (table.lon_deg + half_x > extent[0]) & (table.lon_deg - half_x < extent[1]))
+    if (~table.water[0][in_view]).any():
+        handles.append(mpl.patches.Patch(facecolor=LAND_COLOR, edgecolor="0.5", label="land (policy table)"))
+
+    geo_axes(mpl, ax, grid)
+    ax.set_xlim(extent[0], extent[1])
+    ax.set_ylim(extent[2], extent[3])
+    fig.legend(handles=handles, loc="outside lower center", ncols=3, frameon=False, fontsize=8.5)
+    hours = (track.time_s[i1] - track.time_s[i0]) / 3600.0
+    over = (f"over the {plan.grid.depth_m[0]:g} m currents of the planning forecast" if plan is not None
+            else "over land from the policy table (no forecast given)")
+    ax.set_title(f"{dive.log.path.name}: track coloured by the action decided, {hours:.1f} h\n{over}", fontsize=11)
+    save_png(fig, path)
+    caption = "The track, coloured by the action the executive decided"
+    caption += ", over the planning forecast's surface currents" if plan is not None else ", over land from the policy table"
+    if nominal is not None:
+        caption += ", with the nominal path the plan predicted from the first decision's state"
+    note = f"drawn without {' and '.join(missing)}" if missing else ""
+    if plan is None:
+        note += f": they need {NEED_FORECAST}"
+    return caption + ".", note
+
+
+def _map_extent(grid: Grid, lon: NDArray[np.float64], lat: NDArray[np.float64], *,
+                margin_cells: float) -> tuple[float, float, float, float]:
+    """``(west, east, south, north)`` around the points with a margin, within the grid unless the points leave it.
+
+    The map shows where the dive went rather than the whole planning region; it
+    is at least 8 cells across each way so that the currents around stay readable.
+    """
+    lon_e, lat_e = cell_edges(grid)
+    dx, dy = grid.dlon_deg, grid.dlat_deg
+    x0, x1 = _span(float(lon.min()), float(lon.max()), margin_cells * dx, 8 * dx)
+    y0, y1 = _span(float(lat.min()), float(lat.max()), margin_cells * dy, 8 * dy)
+    x0 = max(x0, min(lon_e[0], float(lon.min()) - dx))
+    x1 = min(x1, max(lon_e[-1], float(lon.max()) + dx))
+    y0 = max(y0, min(lat_e[0], float(lat.min()) - dy))
+    y1 = min(y1, max(lat_e[-1], float(lat.max()) + dy))
+    return x0, x1, y0, y1
+
+
+def _span(lo: float, hi: float, margin: float, least: float) -> tuple[float, float]:
+    """``lo .. hi`` widened by ``margin`` each side, then about its middle to at least ``least``."""
+    lo, hi = lo - margin, hi + margin
+    pad = max(0.0, 0.5 * (least - (hi - lo)))
+    return lo - pad, hi + pad
+
+
+def _draw_plan_currents(mpl: Any, ax: Any, plan: PlanResult, extent: tuple[float, float, float, float]) -> Any:
+    """The planning forecast's top-layer current in ``extent`` as grey arrows scaled by speed (as ``plot_flow_fields``)."""
+    grid = plan.grid
+    u, v = np.asarray(plan.u_m_s[0], dtype=np.float64), np.asarray(plan.v_m_s[0], dtype=np.float64)
+    speed = np.hypot(u, v)
+    if not np.isfinite(speed).any() or float(np.nanmax(speed)) <= 0:
+        return None
+    west, east, south, north = extent
+    cols = np.flatnonzero((grid.lon_deg >= west) & (grid.lon_deg <= east))
+    rows = np.flatnonzero((grid.lat_deg >= south) & (grid.lat_deg <= north))
+    if cols.size == 0 or rows.size == 0:
+        return None
+    stride = max(1, math.ceil(max(cols.size, rows.size) / _MAX_CURRENT_ARROWS_PER_AXIS))
+    jj, ii = np.meshgrid(rows[::stride], cols[::stride], indexing="ij")
+    x, y = grid.lon_deg[ii], grid.lat_deg[jj]
+    us, vs = u[jj, ii], v[jj, ii]
+    ok = np.isfinite(us) & np.isfinite(vs)
+    # Arrow lengths: the 98th percentile speed (of the whole layer) spans 0.9 of the arrow spacing, the fastest 1.5.
+    v98 = float(np.nanpercentile(speed, 98))
+    vmax = float(np.nanmax(speed))
+    cell_x = min(grid.dlon_deg, grid.dlat_deg / cos_lat(grid))
+    scale = max(v98 / (0.9 * stride * cell_x), vmax / (1.5 * stride * cell_x), 1e-12)
+    shaft = float(np.clip(0.06 / math.ceil(cols.size / stride), 0.0018, 0.0035))  # fraction of the axes width
+    return ax.quiver(x[ok], y[ok], us[ok], vs[ok], color=FLOW_ARROW_COLOR, angles="uv", scale_units="x", scale=scale,
+                     width=shaft, headwidth=3.5, headlength=4.0, headaxislength=3.5, pivot="middle", zorder=3)
