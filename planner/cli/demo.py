@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
         heading_deg=args.heading_deg, speedup=args.speedup, out=args.out, timeout_s=args.timeout_s, seed=args.seed,
     )
     sys.stdout.write(result.exec_output)
-    picture = draw_track(args.table, result.track_csv, args.out / "pictures" / "track.png")
+    picture = draw_track(args.table, result.track_csv, args.out / "pictures" / "track.png", truth=args.truth)
     print(f"track      {result.track_csv}")
     print(f"picture    {picture}")
     print(f"demo       {result.wall_s:.1f} s wall in all")

@@ -79,11 +79,14 @@ def read_track(path: Path) -> dict[str, list[float]]:
     return cols
 
 
-def draw_track(table_path: Path, track_csv: Path, out: Path) -> Path:
-    """The simulator's track over the table's region, as a PNG at ``out``."""
+def draw_track(table_path: Path, track_csv: Path, out: Path, *, truth: Path | None = None) -> Path:
+    """The simulator's track over the table's region, as a PNG at ``out``; with ``truth`` (the simulator's
+    forecast, whose first step is the track's time 0) over its currents, with UTC time marks."""
     from planner.contract.table import PolicyTable
-    from planner.shore.plots import plot_track
+    from planner.shore.plots import plot_track, track_times_and_currents
 
     table = PolicyTable.load(table_path)
     track = read_track(track_csv)
-    return plot_track(table, track["lon_deg"], track["lat_deg"], track["mode"], out)
+    start_unix_s, currents = track_times_and_currents(table, track["time_s"], truth)
+    return plot_track(table, track["lon_deg"], track["lat_deg"], track["mode"], out, time_s=track["time_s"],
+                      start_unix_s=start_unix_s, currents=currents)

@@ -16,19 +16,23 @@ Matplotlib is imported only when a picture is drawn, so importing this package
 is cheap (numpy only).
 """
 
+from planner.shore.plots.currents import ForecastMoment, moment_of_plan
 from planner.shore.plots.flow import plot_flow_fields
 from planner.shore.plots.nominal_path import default_start, plot_nominal_path
 from planner.shore.plots.plan_pictures import plot_all
 from planner.shore.plots.policy import plot_policy
 from planner.shore.plots.style import ACTION_COLORS
-from planner.shore.plots.track import plot_track
+from planner.shore.plots.track import plot_track, track_times_and_currents
 
 __all__ = [
     "ACTION_COLORS",
+    "ForecastMoment",
     "default_start",
+    "moment_of_plan",
     "plot_all",
     "plot_flow_fields",
     "plot_nominal_path",
     "plot_policy",
     "plot_track",
+    "track_times_and_currents",
 ]

@@ -10,24 +10,26 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from planner.shore.plots.dive_track import action_color, action_name, action_order, action_runs
+from planner.shore.plots.currents import utc_iso
 from planner.shore.plots.style import load_matplotlib, new_figure, save_png
+from planner.shore.plots.time_axis import heading_axis, time_axis, time_values, wrapped
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from planner.pipeline import PlanResult
     from planner.shore.replay.dive import Dive
 
-__all__ = ["MAX_SERIES_POINTS", "plot_cost", "plot_timeseries"]
+__all__ = ["MAX_SERIES_POINTS", "cost_figure", "plot_cost", "plot_timeseries", "timeseries_figure"]
 
 MAX_SERIES_POINTS = 5000  # points per line in the time series
 
 
-def thin(n: int, max_points: int) -> NDArray[np.int64]:
+def _thin(n: int, max_points: int) -> NDArray[np.int64]:
     """Evenly spaced row indices, at most about ``max_points``, always with the first and last rows."""
     if n == 0:
         return np.zeros(0, dtype=np.int64)
@@ -35,17 +37,22 @@ def thin(n: int, max_points: int) -> NDArray[np.int64]:
     return idx if idx[-1] == n - 1 else np.append(idx, n - 1)
 
 
-def plot_timeseries(dive: Dive, path: Path) -> str:
-    """Draw ``timeseries.png``; returns its caption."""
+def timeseries_figure(dive: Dive) -> tuple[Any, str]:
+    """The figure of ``timeseries.png`` and its caption: depth, heading, action and energy against time.
+
+    The time axis is UTC when the log has the autopilot's UTC (``Dive.unix_offset_s``), else vehicle
+    time since boot, and says which. Heading runs on ``HEADING_LIMITS_DEG`` (0 and 360 inside the
+    frame), its line broken where it wraps past north.
+    """
     track = dive.track
     n = len(track)
-    t_h = track.time_s / 3600.0
-    rows = thin(n, MAX_SERIES_POINTS)
     mpl = load_matplotlib()
+    x = time_values(mpl, track.time_s, dive.unix_offset_s)
+    rows = _thin(n, MAX_SERIES_POINTS)
     fig = new_figure(mpl, 9.5, 8.6)
     ax_depth, ax_head, ax_act, ax_energy = fig.subplots(4, 1, sharex=True, height_ratios=[1.1, 1.0, 0.9, 1.0])
 
-    ax_depth.plot(t_h[rows], track.depth_m[rows], color="#0072b2", linewidth=1.2)
+    ax_depth.plot(x[rows], track.depth_m[rows], color="#0072b2", linewidth=1.2)
     if np.isfinite(track.depth_m).any():  # at least 1 m deep, so that surface noise does not fill the panel
         deepest = max(1.0, float(np.nanmax(track.depth_m)) * 1.05)
         ax_depth.set_ylim(deepest, min(0.0, float(np.nanmin(track.depth_m))) - 0.02 * deepest)
@@ -53,19 +60,16 @@ def plot_timeseries(dive: Dive, path: Path) -> str:
         ax_depth.invert_yaxis()
     ax_depth.set_ylabel("depth (m)")
 
-    heading = track.heading_deg[rows].astype(np.float64)
-    th = t_h[rows].astype(np.float64)
-    wraps = np.flatnonzero(np.abs(np.diff(heading)) > 180.0) + 1  # break the line where it wraps past north
-    ax_head.plot(np.insert(th, wraps, np.nan), np.insert(heading, wraps, np.nan), color="#cc79a7", linewidth=1.0)
-    ax_head.set_ylim(0.0, 360.0)
-    ax_head.set_yticks([0, 90, 180, 270, 360])
+    heading_line, = ax_head.plot(*wrapped(x[rows], track.heading_deg[rows]), color="#cc79a7", linewidth=1.0)
+    heading_line.set_gid("heading")
+    heading_axis(ax_head)
     ax_head.set_ylabel("heading (\u00b0 true)")
 
     runs = action_runs(track.action)
     order = action_order(track.action)
-    ends = np.append(t_h[1:], t_h[-1])  # a decision holds until the next one
+    ends = np.append(x[1:], x[-1])  # a decision holds until the next one
     for y, a in enumerate(order):
-        spans = [(t_h[r.start], max(ends[r.stop - 1] - t_h[r.start], 0.0)) for r in runs if r.action == a]
+        spans = [(x[r.start], max(ends[r.stop - 1] - x[r.start], 0.0)) for r in runs if r.action == a]
         color = action_color(a)
         # Edges drawn in the fill colour keep a run of a few seconds visible on an axis of hours.
         ax_act.broken_barh(spans, (y - 0.38, 0.76), facecolors=color, edgecolors=color, linewidth=0.6)
@@ -74,9 +78,10 @@ def plot_timeseries(dive: Dive, path: Path) -> str:
     ax_act.set_ylabel("action")
 
     energy = track.energy_used_wh
-    ax_energy.plot(t_h[rows], energy[rows], color="#d55e00", linewidth=1.3)
+    ax_energy.plot(x[rows], energy[rows], color="#d55e00", linewidth=1.3)
     ax_energy.set_ylabel("energy used (Wh)")
-    ax_energy.set_xlabel("vehicle time since the autopilot booted (h)")
+    if n:
+        time_axis(mpl, ax_energy, dive.unix_offset_s, float(track.time_s[0]))
     if np.isfinite(energy).any():
         ax_energy.set_ylim(bottom=min(0.0, float(np.nanmin(energy))))
 
@@ -84,20 +89,24 @@ def plot_timeseries(dive: Dive, path: Path) -> str:
         ax.grid(True, color="0.9", linewidth=0.6)
         ax.set_axisbelow(True)
         ax.tick_params(labelsize=8.5)
-    start = dive.utc_s(float(track.time_s[0]))
-    when = ""
-    if isinstance(start, float) and math.isfinite(start):  # utc_s of a float: a float, or None without UTC
-        when = ", first decision at " + str(np.datetime64(int(round(start)), "s")).replace("T", " ") + " UTC"
+    start = dive.utc_s(float(track.time_s[0])) if n else None
+    when = ", first decision at " + utc_iso(start) if isinstance(start, float) and math.isfinite(start) else ""
     fig.suptitle(f"{dive.log.path.name}: {n:,} decisions{when}", fontsize=12)
-    save_png(fig, path)
-    return "Depth, heading, the action decided and the energy used, against vehicle time."
+    against = "UTC" if dive.unix_offset_s is not None else "vehicle time since boot (the log has no UTC)"
+    return fig, f"Depth, heading, the action decided and the energy used, against {against}."
 
+
+def plot_timeseries(dive: Dive, path: Path) -> str:
+    """Draw ``timeseries.png`` (``timeseries_figure``); returns its caption."""
+    fig, caption = timeseries_figure(dive)
+    save_png(fig, path)
+    return caption
 
 
 # --------------------------------------------------------------------------- cost.png
 
 
-def plan_label(plan: PlanResult) -> str:
+def _plan_label(plan: PlanResult) -> str:
     """The plan's model, criterion and costs, for titles."""
     t = plan.table
     if t.model == "physical":
@@ -109,13 +118,14 @@ def plan_label(plan: PlanResult) -> str:
             f" glide {c.get('glide')}")
 
 
-def plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: bool, path: Path) -> str:
-    """Draw ``cost.png`` (``whole``: the planned table drove every decision); returns its caption."""
+def cost_figure(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: bool) -> tuple[Any, str]:
+    """The figure of ``cost.png`` and its caption (``whole``: the planned table drove every decision); time as
+    in ``timeseries_figure``."""
     track = dive.track
-    pick = thin(len(track), MAX_SERIES_POINTS)
-    t_h = track.time_s[pick] / 3600.0
+    pick = _thin(len(track), MAX_SERIES_POINTS)
     energy = track.energy_used_wh
     mpl = load_matplotlib()
+    t_h = time_values(mpl, track.time_s[pick], dive.unix_offset_s)
     fig = new_figure(mpl, 9.5, 4.8)
     ax = fig.subplots()
     gaps = "no table state or unreachable" if whole else "another table, no table state or unreachable"
@@ -124,7 +134,7 @@ def plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: bo
     physical = plan.table.model == "physical"
     ax.set_ylabel("predicted cost-to-go (Wh)" if physical else "predicted cost-to-go (plan cost units)", color="#0072b2")
     ax.set_ylim(bottom=0.0)
-    ax.set_xlabel("vehicle time since the autopilot booted (h)")
+    time_axis(mpl, ax, dive.unix_offset_s, float(track.time_s[0]))
     ax.grid(True, color="0.9", linewidth=0.6)
     twin = ax.twinx()
     line_energy, = twin.plot(t_h, energy[pick], color="#d55e00", linewidth=1.5, label="energy used so far (battery)")
@@ -139,9 +149,15 @@ def plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: bo
         twin.set_ylim(min(0.0, float(np.nanmin(energy))) if np.isfinite(energy).any() else 0.0, hi if hi > 0 else 1.0)
     fig.legend(handles=[line_cost, line_energy], loc="outside lower center", ncols=2, frameon=False, fontsize=8.5)
     ax.set_title(f"{dive.log.path.name}: predicted cost-to-go along the track and the energy spent\n"
-                 f"plan {plan.table.crc32:08x} ({plan_label(plan)})", fontsize=11)
-    save_png(fig, path)
+                 f"plan {plan.table.crc32:08x} ({_plan_label(plan)})", fontsize=11)
     what = "energy still to spend, in Wh" if physical else "cost-to-go"
     caption = (f"The plan's predicted {what}, of the state at each decision (it falls to 0 at the goal),"
                " and the energy the battery reports used")
-    return caption + ("." if whole else f"; only the decisions under table {plan.table.crc32:08x} have a prediction.")
+    return fig, caption + ("." if whole else f"; only the decisions under table {plan.table.crc32:08x} have a prediction.")
+
+
+def plot_cost(dive: Dive, cost: NDArray[np.float64], plan: PlanResult, whole: bool, path: Path) -> str:
+    """Draw ``cost.png`` (``cost_figure``); returns its caption."""
+    fig, caption = cost_figure(dive, cost, plan, whole)
+    save_png(fig, path)
+    return caption

@@ -22,10 +22,10 @@ from numpy.typing import NDArray
 from planner.contract.actions import Action
 from planner.contract.errors import LrauvError
 from planner.grid import Grid
+from planner.shore.plots.currents import CurrentMap, currents_at, draw_currents_with_key, moment_of_plan, utc_iso
 from planner.shore.plots.map_axes import cell_edges, cos_lat, draw_land, draw_outline, geo_axes
 from planner.shore.plots.style import (
     ACTION_COLORS,
-    FLOW_ARROW_COLOR,
     GOAL_COLOR,
     LAND_COLOR,
     START_COLOR,
@@ -33,9 +33,9 @@ from planner.shore.plots.style import (
     action_label,
     load_matplotlib,
     new_figure,
-    nice_speed,
     save_png,
 )
+from planner.shore.plots.time_axis import draw_time_marks, marks_legend, time_marks
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from planner.contract.table import PolicyTable
@@ -53,6 +53,8 @@ __all__ = [
     "action_name",
     "action_order",
     "action_runs",
+    "dive_track_figure",
+    "goal_mask",
     "plot_dive_track",
     "track_segments",
 ]
@@ -60,7 +62,6 @@ __all__ = [
 NOT_FOLLOWING_COLOR = "#3b3b3b"  # safe behaviours (action None): near black, unlike any action colour
 OTHER_ACTION_COLOR = "#b15928"  # an action name this version does not know
 MAX_TRACK_POINTS = 4000  # points drawn on the map, all runs together (about)
-_MAX_CURRENT_ARROWS_PER_AXIS = 28
 _DRAWN_ACTIONS = (Action.FORWARD, Action.FORWARD_LEFT, Action.FORWARD_RIGHT, Action.DRIFT, Action.ROTATE_LEFT,
                   Action.ROTATE_RIGHT, Action.UP, Action.DOWN, Action.AT_GOAL, Action.UNREACHABLE)
 NEED_FORECAST = "the planning forecast (pass --forecast)"
@@ -130,7 +131,7 @@ def track_segments(track: Track, *, max_points: int = MAX_TRACK_POINTS) -> list[
     return segments
 
 
-def _goal_mask(table: PolicyTable) -> tuple[int, NDArray[np.bool_]] | None:
+def goal_mask(table: PolicyTable) -> tuple[int, NDArray[np.bool_]] | None:
     """Goal layer and the goal cells of that layer (spec section 6: water within ``goal_radius`` cells, Chebyshev)."""
     cell = table.locate(table.goal_lat_deg, table.goal_lon_deg, table.goal_depth_m)
     if cell is None:
@@ -172,42 +173,71 @@ def action_order(actions: Sequence[str | None]) -> list[str | None]:
     return order
 
 
-def _start_state(track: Track, rows: NDArray[np.bool_]) -> tuple[int, int, int, int] | None:
-    """The first table state among ``rows`` (a mask), or None."""
-    valid = np.flatnonzero(rows & np.all(track.cell >= 0, axis=1))
+def _start_state(track: Track, rows: NDArray[np.bool_]) -> tuple[int, tuple[int, int, int, int]] | None:
+    """The first row among ``rows`` (a mask) with a table state and a position, and that state; or None."""
+    valid = np.flatnonzero(rows & np.all(track.cell >= 0, axis=1) & np.isfinite(track.lat_deg)
+                           & np.isfinite(track.lon_deg))
     if valid.size == 0:
         return None
     l, j, i, k = (int(x) for x in track.cell[valid[0]])
-    return (l, j, i, k)
+    return int(valid[0]), (l, j, i, k)
 
 
-def plot_dive_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: PlanResult | None,
-                plan_rows: NDArray[np.bool_], path: Path) -> tuple[str, str]:
-    """Draw ``track.png``; returns its caption and what is missing from it ('' when nothing)."""
+def _dive_currents(dive: Dive, plan: PlanResult, valid: NDArray[np.int64]) -> tuple[CurrentMap, str]:
+    """The planning forecast's top-layer currents at the dive's middle (UTC), and how that step was chosen.
+
+    Without UTC in the log, or when the file cannot be read again, the plan's own step.
+    """
+    grid = plan.grid
+    middle = dive.utc_s(0.5 * float(dive.track.time_s[valid[0]] + dive.track.time_s[valid[-1]]))
+    own = CurrentMap(grid=grid, u_m_s=np.asarray(plan.u_m_s[0]), v_m_s=np.asarray(plan.v_m_s[0]),
+                     depth_m=float(grid.depth_m[0]), moment=moment_of_plan(plan))
+    if not isinstance(middle, float):
+        return own, "the plan's step: the log has no UTC"
+    try:
+        return currents_at(plan.forecast.source, grid, middle, depth_m=float(grid.depth_m[0])), \
+            "the step nearest the dive's middle"
+    except LrauvError as exc:
+        return own, f"the plan's step: {exc}"
+
+
+def dive_track_figure(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: PlanResult | None,
+                      plan_rows: NDArray[np.bool_]) -> tuple[Any, str, str]:
+    """The figure of ``track.png``, its caption, and what is missing from it ('' when nothing).
+
+    Land and goal cells come from ``table`` (layer 0); with ``plan``, the currents are the planning
+    forecast's at the dive's time (``_dive_currents``) and the nominal path starts at the position of
+    the first decision under the planned table (``plan_rows``), then follows cell centres. Marks at
+    round UTC times (hourly on a dive of up to 12 h) run along the track.
+    """
     from planner.shore.replay.nominal import nominal_from
 
     track = dive.track
     grid = Grid(lon_deg=table.lon_deg, lat_deg=table.lat_deg, depth_m=np.asarray(table.depth_m))
     valid = np.flatnonzero(np.isfinite(track.lat_deg) & np.isfinite(track.lon_deg))
     missing = []
-    nominal = None
+    nominal_xy = None
     if plan is not None:
         start = _start_state(track, plan_rows)
         if start is None:
             missing.append("the nominal path (no decision under the planned table had a table state)")
         else:
             try:
-                nominal = nominal_from(plan, start)
+                nominal = nominal_from(plan, start[1])
             except LrauvError as exc:
                 missing.append(f"the nominal path ({exc})")
+            else:  # from where the vehicle was, then through the cell centres the plan predicts
+                row = start[0]
+                nominal_xy = (np.concatenate([[track.lon_deg[row]], nominal.lon_deg]),
+                              np.concatenate([[track.lat_deg[row]], nominal.lat_deg]))
     else:
         missing.append("currents")
         missing.append("the nominal path")
     xs = [track.lon_deg[valid]] + [np.array([t.goal_lon_deg]) for t in goals]
     ys = [track.lat_deg[valid]] + [np.array([t.goal_lat_deg]) for t in goals]
-    if nominal is not None:
-        xs.append(nominal.lon_deg)
-        ys.append(nominal.lat_deg)
+    if nominal_xy is not None:
+        xs.append(nominal_xy[0])
+        ys.append(nominal_xy[1])
     radius = max(t.goal_radius_cells for t in goals)
     extent = _map_extent(grid, np.concatenate(xs), np.concatenate(ys), margin_cells=radius + 2.5)
     mpl = load_matplotlib()
@@ -219,34 +249,40 @@ def plot_dive_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], pl
     draw_land(mpl, ax, grid, ~table.water[0])
     handles: list[Any] = []
 
+    over = over_short = "over land from the policy table (no forecast given)"
     if plan is not None:
-        quiver = _draw_plan_currents(mpl, ax, plan, extent)
-        if quiver is not None:
-            key = nice_speed(0.5 * float(np.nanpercentile(np.hypot(plan.u_m_s[0], plan.v_m_s[0]), 98)))
-            ax.quiverkey(quiver, 0.86, 1.012, key, f"{key:g} m/s", labelpos="E", coordinates="axes", color="0.3",
-                         fontproperties={"size": 8})
-            handles.append(mpl.lines.Line2D([], [], color=FLOW_ARROW_COLOR, marker=r"$\rightarrow$", linestyle="none",
-                                            markersize=12, label=f"current at {plan.grid.depth_m[0]:g} m (forecast)"))
+        currents, chosen = _dive_currents(dive, plan, valid)
+        key = draw_currents_with_key(mpl, ax, currents, extent, "forecast")
+        handles += [key] if key is not None else []
+        over = f"over the {currents.label()} ({chosen})"
+        over_short = f"currents at {currents.depth_m:g} m: {currents.moment.label()}\n({chosen})"
 
-    segments = track_segments(track)
-    lines = [np.column_stack([track.lon_deg[s.rows], track.lat_deg[s.rows]]) for s in segments if s.rows.size > 1]
-    colors = [action_color(s.action) for s in segments if s.rows.size > 1]
+    segments = [s for s in track_segments(track) if s.rows.size > 1]  # a single row draws nothing
+    lines = [np.column_stack([track.lon_deg[s.rows], track.lat_deg[s.rows]]) for s in segments]
+    colors = [action_color(s.action) for s in segments]
     # A white casing under the coloured line keeps it readable over arrows and land.
     ax.add_collection(mpl.collections.LineCollection(lines, colors="white", linewidths=4.2, zorder=5,
                                                      capstyle="round", joinstyle="round"))
-    ax.add_collection(mpl.collections.LineCollection(lines, colors=colors, linewidths=2.4, zorder=6,
-                                                     capstyle="round", joinstyle="round"))
+    track_line = mpl.collections.LineCollection(lines, colors=colors, linewidths=2.4, zorder=6, capstyle="round",
+                                                joinstyle="round")
+    track_line.set_gid("track")
+    ax.add_collection(track_line)
     for a in action_order([s.action for s in segments]):
         handles.append(mpl.lines.Line2D([], [], color=action_color(a), linewidth=3.0, label=action_name(a)))
+    marks = time_marks(track.time_s[valid], track.lon_deg[valid], track.lat_deg[valid], dive.unix_offset_s)
+    if draw_time_marks(mpl, ax, marks, label_gap_deg=0.07 * (extent[1] - extent[0])) is not None:
+        handles.append(mpl.lines.Line2D([], [], linestyle="none", marker="o", markersize=4.5, markerfacecolor="black",
+                                        markeredgecolor="white", label=marks_legend(marks)))
 
-    if nominal is not None:
-        ax.plot(nominal.lon_deg, nominal.lat_deg, color="black", linewidth=1.3, linestyle=(0, (4, 2.5)),
-                marker="o", markersize=2.5, zorder=7)
-        handles.append(mpl.lines.Line2D([], [], color="black", linewidth=1.3, linestyle=(0, (4, 2.5)),
-                                        marker="o", markersize=2.5, label="nominal path from the first decision's cell"))
+    if nominal_xy is not None:
+        path_line, = ax.plot(*nominal_xy, color="black", linewidth=1.3, linestyle=(0, (4, 2.5)), marker="o",
+                             markersize=2.5, zorder=7)
+        path_line.set_gid("nominal path")
+        handles.append(mpl.lines.Line2D([], [], color="black", linewidth=1.3, linestyle=(0, (4, 2.5)), marker="o",
+                                        markersize=2.5, label="nominal path from the first decision's position"))
 
     for t in goals:
-        goal = _goal_mask(t)
+        goal = goal_mask(t)
         if goal is not None:
             draw_outline(mpl, ax, grid, goal[1], color=GOAL_COLOR, linewidth=2.0)
         ax.plot(t.goal_lon_deg, t.goal_lat_deg, linestyle="none", marker="*", markersize=16,
@@ -276,18 +312,28 @@ def plot_dive_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], pl
     ax.set_ylim(extent[2], extent[3])
     fig.legend(handles=handles, loc="outside lower center", ncols=3, frameon=False, fontsize=8.5)
     hours = (track.time_s[i1] - track.time_s[i0]) / 3600.0
-    over = (f"over the {plan.grid.depth_m[0]:g} m currents of the planning forecast" if plan is not None
-            else "over land from the policy table (no forecast given)")
-    ax.set_title(f"{dive.log.path.name}: track coloured by the action decided, {hours:.1f} h\n{over}", fontsize=11)
-    save_png(fig, path)
+    when = f"{hours:.1f} h"
+    t0, t1 = dive.utc_s(float(track.time_s[i0])), dive.utc_s(float(track.time_s[i1]))
+    if isinstance(t0, float) and isinstance(t1, float):
+        when = f"{utc_iso(t0)} to {utc_iso(t1)} ({hours:.1f} h)"
+    ax.set_title(f"{dive.log.path.name}: the track by action decided, {when}\n{over_short}", fontsize=9.5,
+                 loc="left")
     caption = "The track, coloured by the action the executive decided"
-    caption += ", over the planning forecast's surface currents" if plan is not None else ", over land from the policy table"
-    if nominal is not None:
-        caption += ", with the nominal path the plan predicted from the first decision's state"
+    caption += f", {over}" if plan is not None else ", over land from the policy table"
+    if nominal_xy is not None:
+        caption += ", with the nominal path the plan predicted from the first decision's position"
     note = f"drawn without {' and '.join(missing)}" if missing else ""
     if plan is None:
         note += f": they need {NEED_FORECAST}"
-    return caption + ".", note
+    return fig, caption + ".", note
+
+
+def plot_dive_track(dive: Dive, table: PolicyTable, goals: list[PolicyTable], plan: PlanResult | None,
+                    plan_rows: NDArray[np.bool_], path: Path) -> tuple[str, str]:
+    """Draw ``track.png`` (``dive_track_figure``); returns its caption and what is missing from it."""
+    fig, caption, note = dive_track_figure(dive, table, goals, plan, plan_rows)
+    save_png(fig, path)
+    return caption, note
 
 
 def _map_extent(grid: Grid, lon: NDArray[np.float64], lat: NDArray[np.float64], *,
@@ -313,30 +359,3 @@ def _span(lo: float, hi: float, margin: float, least: float) -> tuple[float, flo
     lo, hi = lo - margin, hi + margin
     pad = max(0.0, 0.5 * (least - (hi - lo)))
     return lo - pad, hi + pad
-
-
-def _draw_plan_currents(mpl: Any, ax: Any, plan: PlanResult, extent: tuple[float, float, float, float]) -> Any:
-    """The planning forecast's top-layer current in ``extent`` as grey arrows scaled by speed (as ``plot_flow_fields``)."""
-    grid = plan.grid
-    u, v = np.asarray(plan.u_m_s[0], dtype=np.float64), np.asarray(plan.v_m_s[0], dtype=np.float64)
-    speed = np.hypot(u, v)
-    if not np.isfinite(speed).any() or float(np.nanmax(speed)) <= 0:
-        return None
-    west, east, south, north = extent
-    cols = np.flatnonzero((grid.lon_deg >= west) & (grid.lon_deg <= east))
-    rows = np.flatnonzero((grid.lat_deg >= south) & (grid.lat_deg <= north))
-    if cols.size == 0 or rows.size == 0:
-        return None
-    stride = max(1, math.ceil(max(cols.size, rows.size) / _MAX_CURRENT_ARROWS_PER_AXIS))
-    jj, ii = np.meshgrid(rows[::stride], cols[::stride], indexing="ij")
-    x, y = grid.lon_deg[ii], grid.lat_deg[jj]
-    us, vs = u[jj, ii], v[jj, ii]
-    ok = np.isfinite(us) & np.isfinite(vs)
-    # Arrow lengths: the 98th percentile speed (of the whole layer) spans 0.9 of the arrow spacing, the fastest 1.5.
-    v98 = float(np.nanpercentile(speed, 98))
-    vmax = float(np.nanmax(speed))
-    cell_x = min(grid.dlon_deg, grid.dlat_deg / cos_lat(grid))
-    scale = max(v98 / (0.9 * stride * cell_x), vmax / (1.5 * stride * cell_x), 1e-12)
-    shaft = float(np.clip(0.06 / math.ceil(cols.size / stride), 0.0018, 0.0035))  # fraction of the axes width
-    return ax.quiver(x[ok], y[ok], us[ok], vs[ok], color=FLOW_ARROW_COLOR, angles="uv", scale_units="x", scale=scale,
-                     width=shaft, headwidth=3.5, headlength=4.0, headaxislength=3.5, pivot="middle", zorder=3)

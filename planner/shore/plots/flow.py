@@ -27,12 +27,13 @@ from planner.shore.plots.style import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
+    from planner.shore.plots.currents import ForecastMoment
     from planner.contract.settings import Goal
     from planner.grid import Grid
     from planner.paper.transitions import TransitionModel
     from planner.physical.model import PhysicalModel
 
-__all__ = ["plot_flow_fields"]
+__all__ = ["flow_figure", "plot_flow_fields"]
 
 _MAX_FLOW_ARROWS_PER_PANEL = 28
 
@@ -44,13 +45,27 @@ def plot_flow_fields(
     path: str | os.PathLike[str],
     *,
     goal: Goal | None = None,
+    when: ForecastMoment | None = None,
 ) -> Path:
+    """``flow_figure`` written as a PNG at ``path``."""
+    return save_png(flow_figure(u_m_s, v_m_s, model, goal=goal, when=when), path)
+
+
+def flow_figure(
+    u_m_s: NDArray[np.float64],
+    v_m_s: NDArray[np.float64],
+    model: TransitionModel | PhysicalModel,
+    *,
+    goal: Goal | None = None,
+    when: ForecastMoment | None = None,
+) -> Any:
     """Currents of every layer, one panel per layer (paper Fig. 3; spec sections 1 and 3).
 
     ``u_m_s``, ``v_m_s``: eastward and northward current on the planning grid,
     shape ``(L, ny, nx)``, NaN for land. Arrows are coloured and scaled by speed
     (one colour scale for all layers), land is filled, calm cells (spec section 3)
-    are dotted, and the goal cell, if ``goal`` is given, is starred.
+    are dotted, and the goal cell, if ``goal`` is given, is starred. ``when``: the
+    forecast step the currents are from, named in the title.
     """
     grid = model.grid
     u, v = _check_currents(u_m_s, v_m_s, grid)
@@ -123,8 +138,9 @@ def plot_flow_fields(
                                         label="goal cell"))
     fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), frameon=False, fontsize=9)
     suffix = f", every {stride} cells" if stride > 1 else ""
-    fig.suptitle(f"Currents on the planning grid ({grid.nx} \u00d7 {grid.ny} cells{suffix})", fontsize=12)
-    return save_png(fig, path)
+    step = f"\n{when.label()}" if when is not None else ""
+    fig.suptitle(f"Currents on the planning grid ({grid.nx} \u00d7 {grid.ny} cells{suffix}){step}", fontsize=12)
+    return fig
 
 
 def _check_currents(u_m_s: Any, v_m_s: Any, grid: Grid) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -1,4 +1,4 @@
-"""Maps of the planning grid: lon/lat axes, cell edges, land and cell outlines, arrow thinning.
+"""Maps of the planning grid: lon/lat axes, cell edges, land with its coastline, cell outlines, arrow thinning.
 
 Shared by the plan pictures, the track picture and the dive report. A grid's
 cell centres lie on its bbox edges (spec section 1), so a map spans half a cell
@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from planner.grid import Grid
 
 __all__ = [
+    "COAST_COLOR",
     "MAX_ARROWS_PER_AXIS",
     "arrow_stride",
     "cell_edges",
@@ -31,6 +32,7 @@ __all__ = [
 ]
 
 MAX_ARROWS_PER_AXIS = 40  # thin out arrows on big grids so they stay readable
+COAST_COLOR = "#8c7a55"
 
 
 def cos_lat(grid: Grid) -> float:
@@ -64,13 +66,24 @@ def cell_edges(grid: Grid) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 
 
 def draw_land(mpl: Any, ax: Any, grid: Grid, land: NDArray[np.bool_]) -> None:
-    """Fill the cells where ``land`` is true, outlined."""
+    """Fill the land where ``land`` (a cell mask) is true, bounded by a smooth coastline.
+
+    The coastline is the 0.5 contour of the mask between cell centres (matplotlib's
+    ``contour``, linear between centres): it separates every land centre from every water
+    centre as the cells do, but cuts the cells' corners instead of drawing their staircase.
+    The mask is carried to the map's frame, so land that reaches the grid's edge fills to it.
+    The filled land has gid ``land``, the line gid ``coastline``.
+    """
     if not land.any():
         return
     lon_e, lat_e = cell_edges(grid)
-    ax.pcolormesh(lon_e, lat_e, np.ma.masked_where(~land, np.ones(land.shape)),
-                  cmap=mpl.colors.ListedColormap([LAND_COLOR]), vmin=0.0, vmax=1.0, zorder=2)
-    draw_outline(mpl, ax, grid, land, color="#8c7a55", linewidth=0.8)
+    x = np.concatenate([[lon_e[0]], grid.lon_deg, [lon_e[-1]]])
+    y = np.concatenate([[lat_e[0]], grid.lat_deg, [lat_e[-1]]])
+    z = np.pad(np.asarray(land, dtype=np.float64), 1, mode="edge")
+    fill = ax.contourf(x, y, z, levels=[0.5, 1.5], colors=[LAND_COLOR], zorder=2)
+    fill.set_gid("land")
+    coast = ax.contour(x, y, z, levels=[0.5], colors=[COAST_COLOR], linewidths=0.9, zorder=3.5)
+    coast.set_gid("coastline")
 
 
 def draw_outline(mpl: Any, ax: Any, grid: Grid, mask: NDArray[np.bool_], *, color: str, linewidth: float) -> None:

@@ -44,19 +44,34 @@ from planner.shore.plots.style import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
+    from planner.shore.plots.currents import ForecastMoment
     from planner.grid import Grid
     from planner.paper.solve import PathStep, Solution
     from planner.physical.solve import PhysicalSolution, PhysicalStep
     from planner.shore.plots.solutions import AnySolution
 
-__all__ = ["default_start", "plot_nominal_path"]
+__all__ = ["default_start", "nominal_path_figure", "plot_nominal_path"]
 
 
 def plot_nominal_path(
     solution: AnySolution,
     start: tuple[int, int, int, int],
     path: str | os.PathLike[str],
+    *,
+    start_lon_lat: tuple[float, float] | None = None,
+    when: ForecastMoment | None = None,
 ) -> Path:
+    """``nominal_path_figure`` written as a PNG at ``path``."""
+    return save_png(nominal_path_figure(solution, start, start_lon_lat=start_lon_lat, when=when), path)
+
+
+def nominal_path_figure(
+    solution: AnySolution,
+    start: tuple[int, int, int, int],
+    *,
+    start_lon_lat: tuple[float, float] | None = None,
+    when: ForecastMoment | None = None,
+) -> Any:
     """The nominal path from ``start`` ``(l, j, i, k)`` to the goal (paper Fig. 6).
 
     The path is ``planner.paper.solve.nominal_path``: the policy followed with each
@@ -66,7 +81,9 @@ def plot_nominal_path(
     circular arrows, layer changes are labelled with their depths, and steps in
     another layer are dashed. Red marks the start, green the goal (paper Fig. 6).
     For a physical plan the path is ``PhysicalSolution.nominal`` (each action's
-    most likely outcome) and the costs are in Wh.
+    most likely outcome) and the costs are in Wh. ``start_lon_lat``: where the
+    vehicle really starts (in ``start``'s cell); the path then begins there, not
+    at the cell's centre. ``when``: the forecast step planned on, in the title.
     """
     model = solution.model
     grid = model.grid
@@ -113,8 +130,14 @@ def plot_nominal_path(
                 [segs[n] for n in sel], colors=[colors[n] for n in sel], linewidths=6.0, zorder=5,
                 linestyles=(0, (1.0, 0.6)) if dashed else "solid", capstyle="butt" if dashed else "round",
                 joinstyle="round"))
-    if len(steps) > 1:
-        ax.plot(x, y, color="black", linewidth=1.3, solid_capstyle="round", solid_joinstyle="round", zorder=6)
+    l0, j0, i0, k0 = start
+    sx, sy = (float(grid.lon_deg[i0]), float(grid.lat_deg[j0])) if start_lon_lat is None else start_lon_lat
+    if start_lon_lat is not None:  # the vehicle's own position first, then the cell centres
+        x, y = np.concatenate([[sx], x]), np.concatenate([[sy], y])
+    if x.size > 1:
+        centre_line, = ax.plot(x, y, color="black", linewidth=1.3, solid_capstyle="round", solid_joinstyle="round",
+                               zorder=6)
+        centre_line.set_gid("nominal path")
     rot_count: Counter[tuple[int, int, Action]] = Counter()
     for s in steps:
         if s.action in ROTATE_MARKERS:
@@ -132,15 +155,16 @@ def plot_nominal_path(
             ax.plot(grid.lon_deg[s0.i], grid.lat_deg[s0.j], linestyle="none",
                     marker="^" if s0.action == Action.UP else "v", markersize=9, color=ACTION_COLORS[s0.action],
                     markeredgecolor="white", zorder=8)
-    l0, j0, i0, k0 = start
-    ax.plot(grid.lon_deg[i0], grid.lat_deg[j0], linestyle="none", marker="o", markersize=13,
+    ax.plot(sx, sy, linestyle="none", marker="o", markersize=13,
             markerfacecolor=START_COLOR, markeredgecolor="black", markeredgewidth=1.2, zorder=10, clip_on=False)
     gc = solution.goal_cells
     ax.plot(grid.lon_deg[gc.i], grid.lat_deg[gc.j], linestyle="none", marker="*", markersize=20,
             markerfacecolor=GOAL_COLOR, markeredgecolor="black", markeredgewidth=1.0, zorder=10, clip_on=False)
     geo_axes(mpl, ax, grid)
-    ax.set_title(f"Nominal path from the start (heading {Direction(k0).name}, {grid.depth_m[l0]:g} m) to the goal\n"
-                 f"over the flow directions and land of layer {lb} ({grid.depth_m[lb]:g} m)", fontsize=11)
+    where = "the vehicle's start" if start_lon_lat is not None else "the start cell's centre"
+    ax.set_title(f"Nominal path from {where} (heading {Direction(k0).name}, {grid.depth_m[l0]:g} m) to the goal\n"
+                 f"over the flow directions and land of layer {lb} ({grid.depth_m[lb]:g} m)"
+                 + (f"\nplanned on the {when.label()}" if when is not None else ""), fontsize=10)
 
     handles = [
         mpl.lines.Line2D([], [], linestyle="none", marker="o", markersize=10, markerfacecolor=START_COLOR,
@@ -170,14 +194,14 @@ def plot_nominal_path(
     handles.insert(3, mpl.lines.Line2D([], [], color="black", linewidth=1.3, label="path through cell centres"))
     side.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, 0.99), frameon=False, fontsize=9,
                 borderaxespad=0.0, handlelength=3.0)
-    keep_clear = [(float(grid.lon_deg[i0]), float(grid.lat_deg[j0]), 11.0),
+    keep_clear = [(sx, sy, 11.0),
                   (float(grid.lon_deg[gc.i]), float(grid.lat_deg[gc.j]), 11.0)]
     keep_clear += [(float(xx), float(yy), 4.0) for xx, yy in zip(x, y)]
     _place_labels(fig, ax, _layer_change_labels(steps, grid), keep_clear)
     side.text(0.02, 0.02, summary, transform=side.transAxes, va="bottom", ha="left",
               fontsize=8.5, family="monospace",
               bbox={"boxstyle": "round,pad=0.5", "facecolor": "white", "edgecolor": "0.6"})
-    return save_png(fig, path)
+    return fig
 
 
 def default_start(solution: AnySolution) -> tuple[int, int, int, int]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -40,10 +40,11 @@ from planner.shore.plots.style import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
+    from planner.shore.plots.currents import ForecastMoment
     from planner.grid import Grid
     from planner.shore.plots.solutions import AnySolution
 
-__all__ = ["check_heading", "check_layer", "plot_policy"]
+__all__ = ["check_heading", "check_layer", "plot_policy", "policy_figure"]
 
 _STILL_MARKER = {Action.DRIFT: "o", Action.FORWARD: "o", Action.FORWARD_LEFT: "o", Action.FORWARD_RIGHT: "o",
                  Action.UP: "^", Action.DOWN: "v"}
@@ -55,7 +56,19 @@ def plot_policy(
     *,
     heading: int = 0,
     layer: int | None = None,
+    when: ForecastMoment | None = None,
 ) -> Path:
+    """``policy_figure`` written as a PNG at ``path``."""
+    return save_png(policy_figure(solution, heading=heading, layer=layer, when=when), path)
+
+
+def policy_figure(
+    solution: AnySolution,
+    *,
+    heading: int = 0,
+    layer: int | None = None,
+    when: ForecastMoment | None = None,
+) -> Any:
     """The policy for one heading in one layer (paper Fig. 5; spec sections 5 to 7).
 
     One symbol per water cell (thinned on big grids): moves are arrows along the
@@ -65,7 +78,8 @@ def plot_policy(
     a green outline, unreachable cells are crosses. The background is the
     cost-to-go of the state ``(l, j, i, heading)``. ``layer`` defaults to the
     goal layer. For a physical plan the arrows follow each action's most likely
-    outcome and the cost-to-go is in Wh.
+    outcome and the cost-to-go is in Wh. ``when``: the forecast step planned on,
+    named in the title.
     """
     model = solution.model
     grid = model.grid
@@ -153,10 +167,11 @@ def plot_policy(
         + (f"physical model, {model.settings.criterion}; arrows: most likely move, length \u221d tiles{thin}"
            if is_physical(solution) else
            f"{model.settings.criterion}, {model.settings.uncertainty} uncertainty; "
-           f"arrows: nominal move, length \u221d tiles{thin}"),
+           f"arrows: nominal move, length \u221d tiles{thin}")
+        + (f"\nplanned on the {when.label()}" if when is not None else ""),
         fontsize=11,
     )
-    return save_png(fig, path)
+    return fig
 
 
 def check_heading(heading: int) -> int:

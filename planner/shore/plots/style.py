@@ -68,6 +68,7 @@ def load_matplotlib() -> Any:
     import matplotlib.backends.backend_agg
     import matplotlib.collections
     import matplotlib.colors
+    import matplotlib.dates
     import matplotlib.figure
     import matplotlib.lines
     import matplotlib.patches
