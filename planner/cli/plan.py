@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     if args.export_values:
         print(f"values     {export_values(result, args.export_values)}")
     if args.plot:
-        from planner.shore.plots import default_start, plot_all
+        from planner.shore.plots import default_start, moment_of_plan, plot_all
 
         start = default_start(result.solution) if start is None else start
         layer = args.plot_layer
@@ -114,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
         if not 0 <= args.plot_heading < 8:
             raise LrauvError(f"--plot-heading: expected 0..7 (0 = east, counter-clockwise); got {args.plot_heading}")
         paths = plot_all(result.u_m_s, result.v_m_s, result.solution, args.plot, start=start, heading=args.plot_heading,
-                         layer=layer)
+                         layer=layer, when=moment_of_plan(result),
+                         start_lon_lat=None if args.start is None else (args.start[0], args.start[1]))
         for p in paths:
             print(f"picture    {p}")
     return 0
