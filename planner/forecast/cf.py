@@ -1,4 +1,4 @@
-"""CF conventions as the readers need them: coordinate names and roles, units, time and depth decoding.
+"""CF conventions as the readers need them: coordinate names and roles, units, time (any CF calendar) and depth.
 
 Which dimension is time, depth, an s-level axis, latitude or longitude (from CF ``axis``,
 ``standard_name``, ``units``, ``positive`` or, failing those, common names); velocity units to
@@ -15,6 +15,8 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from planner.contract.errors import ForecastError
+from planner.forecast.calendars import decode_calendar_times, needs_cftime
+from planner.forecast.model import parse_origin
 
 # Common coordinate names, used when a dimension's variable has no CF axis, standard_name or units.
 _TIME_NAMES = {"time", "t", "ocean_time", "time_counter", "valid_time", "times", "mt", "scrum_time"}
@@ -34,7 +36,6 @@ _TIME_UNIT_S = {
     "h": 3600.0, "hr": 3600.0, "hrs": 3600.0, "hour": 3600.0, "hours": 3600.0,
     "d": 86400.0, "day": 86400.0, "days": 86400.0,
 }  # fmt: skip
-_STANDARD_CALENDARS = {"", "standard", "gregorian", "proleptic_gregorian"}
 
 # Finite values beyond this are undeclared fill (no ocean current is 1 km/s).
 _MAX_PLAUSIBLE_SPEED_M_S = 1000.0
@@ -292,9 +293,11 @@ def read_time(
     else:
         factor, origin = _parse_time_units(units, label, tvar_name)
     calendar = attr(tvar, "calendar").lower()
-    if origin is not None and calendar not in _STANDARD_CALENDARS:
-        notes.append(f"time calendar {calendar!r} is not the standard one: dates derived from it are approximate")
-    time_s = values * factor
+    if origin is not None and needs_cftime(calendar, parse_origin(origin, label)):
+        time_s, origin, note = decode_calendar_times(values, factor, units, calendar, label, tvar_name)
+        notes.append(note)
+    else:
+        time_s = values * factor
     if time_s.size > 1 and np.any(np.diff(time_s) <= 0):
         raise ForecastError(
             f"{label}: time variable {tvar_name}: expected strictly increasing times; got {values.tolist()[:8]}"
