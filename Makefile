@@ -37,7 +37,7 @@ demo: $(STAMP)
 	$(LRAUV) forecast synth $(OUT)/forecast.nc --issue 0
 	$(LRAUV) forecast synth $(OUT)/truth.nc
 	$(LRAUV) plan missions/demo.yaml --forecast $(OUT)/forecast.nc --out $(OUT)/demo.lrpt \
-	  --export-values $(OUT)/values.npz --plot $(OUT)/pictures --start $(DEMO_START),0,0
+	  --export-values $(OUT)/values.nc --plot $(OUT)/pictures --start $(DEMO_START),0,0
 	$(LRAUV) demo --mission missions/demo.yaml --table $(OUT)/demo.lrpt --truth $(OUT)/truth.nc \
 	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --out $(OUT)
 	$(LRAUV) replay $(OUT)/demo.mcap --report $(OUT)/report \

@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import hashlib
-import io
-import os
 import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, NotRequired, TypedDict
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,7 +30,6 @@ from planner.grid import Grid
 from planner.contract.geodesy import BBox
 from planner.contract.settings import Goal, PlanSettings
 from planner.paper.solve import Solution, goal_cells_on, solve
-from planner.contract.atomic import write_atomic
 from planner.contract.table import PolicyTable
 from planner.paper.transitions import TransitionModel, build_transitions
 from planner.physical.model import (
@@ -503,42 +500,12 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
                       model=model, solution=solution, table=table, timings_s=timings)
 
 
-class ValueArrays(TypedDict):
-    """The arrays of an exported ``.npz`` by name (spec section 8)."""
-
-    cost: NDArray[np.float64]
-    steps: NDArray[np.int64]
-    action: NDArray[np.uint8]
-    lon: NDArray[np.float64]
-    lat: NDArray[np.float64]
-    depth: NDArray[np.float64]
-    flow_dir: NDArray[np.int8]
-    time_s: NotRequired[NDArray[np.float64]]  # physical plans only
-
-
-def export_values(result: PlanResult, path: str | os.PathLike[str]) -> Path:
-    """Write the arrays of spec section 8 to an ``.npz``, atomically."""
-    sol = result.solution
-    buf = io.BytesIO()
-    arrays: ValueArrays = {
-        "cost": np.ascontiguousarray(sol.cost),
-        "steps": np.ascontiguousarray(sol.steps).astype(np.int64),
-        "action": np.ascontiguousarray(sol.action).astype(np.uint8),
-        "lon": result.grid.lon_deg,
-        "lat": result.grid.lat_deg,
-        "depth": result.grid.depth_m,
-        "flow_dir": np.asarray(result.model.flow_dir, dtype=np.int8),
-    }
-    if isinstance(sol, PhysicalSolution):  # cost in Wh and the time to go, s (docs/physical-model.md)
-        arrays["time_s"] = np.ascontiguousarray(sol.time_s)
-    np.savez_compressed(buf, **arrays)
-    return write_atomic(path, buf.getvalue())
-
-
-def mission_forecast(mission: Mission, *, out_dir: Path) -> Path:
+def mission_forecast(mission: Mission, *, cache_dir: Path | None = None) -> Path:
     """The forecast file a mission names: its file, the newest file in its directory, or a generated one.
 
-    A generated (synthetic) forecast is written to ``out_dir`` once and reused after.
+    A generated (synthetic) forecast is written once into the per-user cache (``planner.forecast.cache``:
+    ``cache_dir``, else ``$LRAUV_CACHE_DIR``, ``$XDG_CACHE_HOME/lrauv`` or ``~/.cache/lrauv``) and reused
+    after; never beside the mission or the table.
     """
     src = mission.forecast
     if src.file is not None:
@@ -548,11 +515,14 @@ def mission_forecast(mission: Mission, *, out_dir: Path) -> Path:
         if not files:
             raise PlannerError(f"{mission.path}: forecast.directory {src.directory} holds no .nc files")
         return files[-1]
+    from planner import __version__
+    from planner.forecast.cache import forecasts_dir
     from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
     if src.synthetic_seed is None:  # load_mission gives a file, a directory or a synthetic seed
         raise PlannerError(f"{mission.path}: forecast: expected a file, a directory or a synthetic seed")
-    path = out_dir / f"synthetic_seed{src.synthetic_seed}_{src.synthetic_hours}h.nc"
+    # The generator's version in the name: a newer generator does not reuse an older one's file.
+    path = forecasts_dir(cache_dir) / f"synthetic_v{__version__}_seed{src.synthetic_seed}_{src.synthetic_hours}h.nc"
     if not path.exists():
         write_synthetic(path, SyntheticSettings(seed=src.synthetic_seed, hours=src.synthetic_hours))
     return path

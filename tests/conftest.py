@@ -13,6 +13,16 @@ from tests.support import REPO
 SHARED_OCEAN = Path(os.environ.get("LRAUV_OCEAN_DATA", REPO.parent / "shared" / "data" / "ocean"))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def forecast_cache(tmp_path_factory):
+    """Downloaded and synthetic forecasts go to a temporary cache (planner.forecast.cache), never the user's;
+    processes the tests start inherit it."""
+    with pytest.MonkeyPatch.context() as mp:
+        path = tmp_path_factory.mktemp("cache")
+        mp.setenv("LRAUV_CACHE_DIR", str(path))
+        yield path
+
+
 @pytest.fixture(scope="session")
 def synthetic_forecast(tmp_path_factory) -> Path:
     """The built-in Southern California Bight forecast as a real netCDF file (24 h)."""

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         vehicle = replace(vehicle, cruise_speed_m_s=args.cruise_speed,
                           max_speed_m_s=max(vehicle.max_speed_m_s, args.cruise_speed))
         mission = replace(mission, settings=replace(mission.settings, vehicle=vehicle))
-    forecast = args.forecast or mission_forecast(mission, out_dir=args.out or Path("."))
+    forecast = args.forecast or mission_forecast(mission)
     try:
         truth = load_truth(args.truth)
     except WorldError as exc:

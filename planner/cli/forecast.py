@@ -58,9 +58,12 @@ def add_parser(sub: Subcommands) -> None:
     fc = sub.add_parser("forecast", help="inspect or generate forecasts")
     fsub = fc.add_subparsers(dest="forecast_command", required=True)
     info = fsub.add_parser("info", help="describe a forecast file as the loader understands it")
-    info.add_argument("file", type=Path)
+    info.add_argument("file", metavar="FILE|URL", help="a netCDF file, or the http(s) URL of one (downloaded to the cache)")
     info.add_argument("--variables", type=lambda t: t.split(","))
     info.add_argument("--grid-file", type=Path)
+    info.add_argument("--cache-dir", type=Path, metavar="DIR",
+                      help="cache for downloaded forecasts (default: $LRAUV_CACHE_DIR, $XDG_CACHE_HOME/lrauv or "
+                           "~/.cache/lrauv)")
     synth = fsub.add_parser("synth", help="write the built-in synthetic Southern California Bight forecast")
     synth.add_argument("out", type=Path)
     synth.add_argument("--seed", type=int, default=0)
@@ -127,7 +130,10 @@ def run(args: argparse.Namespace) -> int:
         variables = tuple(args.variables) if args.variables else None
         if variables is not None and len(variables) != 2:
             raise LrauvError(f"--variables: expected two names U,V; got {args.variables}")
-        print(describe(open_forecast(args.file, variables=variables, grid_file=args.grid_file)))
+        from planner.cli.plan import local_forecast
+
+        path = local_forecast(args.file, args.cache_dir)
+        print(describe(open_forecast(path, variables=variables, grid_file=args.grid_file)))
         return 0
     if args.forecast_command == "ensemble":
         print(f"wrote {write_ensemble_from_args(args)}")

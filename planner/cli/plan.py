@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import shlex
 import sys
 import time
 from dataclasses import replace
@@ -38,9 +39,9 @@ def costs(text: str) -> dict[str, float]:
 def add_parser(sub: Subcommands) -> None:
     plan = sub.add_parser("plan", help="plan a feedback policy and write the policy table")
     plan.add_argument("mission", nargs="?", type=Path, help="mission YAML file (flags below override it)")
-    plan.add_argument("--forecast", type=Path, nargs="+", metavar="FILE",
-                      help="forecast netCDF file; several files (or a file with a member dimension) are the members "
-                           "of an ensemble, the outcomes of the physical model")
+    plan.add_argument("--forecast", nargs="+", metavar="FILE|URL",
+                      help="forecast netCDF file or http(s) URL of one (downloaded to the cache); several (or a file "
+                           "with a member dimension) are the members of an ensemble, the outcomes of the physical model")
     plan.add_argument("--variables", type=lambda t: t.split(","), help="U,V variable names, when not found by CF standard names")
     plan.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
     plan.add_argument("--bbox", type=lambda t: floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
@@ -65,11 +66,16 @@ def add_parser(sub: Subcommands) -> None:
                                                      "forecast's step (default: every step)")
     plan.add_argument("--current-error", metavar="M_S|measured",
                       help="physical model: forecast error per current component, m/s, or 'measured' from the data")
-    plan.add_argument("--previous-forecast", type=Path, metavar="FILE",
+    plan.add_argument("--previous-forecast", metavar="FILE|URL",
                       help="an earlier issue of the forecast: with --current-error measured, the error is the issues' difference")
     plan.add_argument("--out", type=Path, help="policy table to write (default: <mission name>.lrpt)")
     plan.add_argument("--no-compress", action="store_true", help="store the table payload uncompressed")
-    plan.add_argument("--export-values", type=Path, help="also write the arrays of spec section 8 to this .npz")
+    plan.add_argument("--export-values", type=Path, metavar="FILE.nc|FILE.npz",
+                      help="also write the plan's values: CF-1.8 netCDF (.nc, docs/plan-values.md) or the arrays of "
+                           "spec section 8 (.npz)")
+    plan.add_argument("--cache-dir", type=Path, metavar="DIR",
+                      help="cache for downloaded and synthetic forecasts (default: $LRAUV_CACHE_DIR, "
+                           "$XDG_CACHE_HOME/lrauv or ~/.cache/lrauv)")
     plan.add_argument("--plot", type=Path, metavar="DIR", help="write PNG pictures of the flow, policy and nominal path here")
     plan.add_argument("--plot-heading", type=int, default=0, help="heading k (0 = E, counter-clockwise) for the policy picture")
     plan.add_argument("--plot-layer", type=int, help="layer for the policy picture (default: the goal's)")
@@ -81,10 +87,13 @@ def add_parser(sub: Subcommands) -> None:
 def run(args: argparse.Namespace) -> int:
     from planner.contract.atomic import write_atomic
     from planner.contract.mission import load_mission
-    from planner.pipeline import export_values, plan_with_scheduler
+    from planner.pipeline import plan_with_scheduler
     from planner.plan_summary import summary_lines, time_line
+    from planner.plan_values import check_suffix, export_values
 
     progress = not args.quiet
+    if args.export_values:
+        check_suffix(args.export_values)  # before the plan's minutes, not after
     mission = None if args.mission is None else load_mission(args.mission)
     request = plan_request(args, mission)
     out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
@@ -103,7 +112,9 @@ def run(args: argparse.Namespace) -> int:
         print(start_line(result, args.start, start))
     print(time_line(result, time.perf_counter() - t0))
     if args.export_values:
-        print(f"values     {export_values(result, args.export_values)}")
+        history = shlex.join(["lrauv", *sys.argv[1:]]) if sys.argv[1:2] == ["plan"] else "lrauv plan"
+        mission_file = None if mission is None else str(mission.path)
+        print(f"values     {export_values(result, args.export_values, mission=mission_file, history=history)}")
     if args.plot:
         from planner.shore.plots import default_start, moment_of_plan, plot_all
 
@@ -127,14 +138,18 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     from planner.contract.settings import CRITERIA, Costs, Goal, PlanSettings
     from planner.pipeline import PlanRequest, mission_forecast
 
-    # Forecast: the flag, else the mission's source.
-    forecast_path = args.forecast[0] if args.forecast else None
-    ensemble = tuple(args.forecast[1:]) if args.forecast else ()
+    # Forecast: the flag (files or URLs, downloaded to the cache), else the mission's source.
+    sources = [local_forecast(s, args.cache_dir) for s in args.forecast or ()]
+    forecast_path = sources[0] if sources else None
+    ensemble = tuple(sources[1:])
     time_index, time_iso = args.time_index, args.time
     variables = tuple(args.variables) if args.variables else None
     grid_file = args.grid_file
     if forecast_path is None and mission is not None:
-        forecast_path = mission_forecast(mission, out_dir=(args.out or Path(mission.name + ".lrpt")).parent)
+        forecast_path = mission_forecast(mission, cache_dir=args.cache_dir)
+        if mission.forecast.synthetic_seed is not None:  # say where the generated file is: never beside the mission
+            print(f"cache      synthetic forecast (seed {mission.forecast.synthetic_seed}, "
+                  f"{mission.forecast.synthetic_hours} h) {forecast_path}")
         if time_index is None and time_iso is None:
             time_index, time_iso = mission.forecast.time_index, mission.forecast.time_iso
         variables = variables or mission.forecast.variables
@@ -206,8 +221,21 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     return PlanRequest(
         forecast_path=forecast_path, goal=goal, depths_m=tuple(float(d) for d in depths), settings=settings,
         bbox=bbox, nx=nx, ny=ny, time_index=time_index, time_iso=time_iso, variables=variables,
-        grid_file=grid_file, ensemble=ensemble, previous_forecast=args.previous_forecast,
+        grid_file=grid_file, ensemble=ensemble,
+        previous_forecast=None if args.previous_forecast is None else local_forecast(args.previous_forecast,
+                                                                                       args.cache_dir),
     )
+
+
+def local_forecast(source: str, cache_dir: Path | None) -> Path:
+    """A forecast argument as a file: an http(s) URL is downloaded to the cache (and said so), a path kept as given."""
+    from planner.forecast.remote import fetch, is_url
+
+    if not is_url(source):
+        return Path(source)
+    fetched = fetch(source, cache_dir)
+    print(f"cache      {fetched.describe()}")
+    return fetched.path
 
 
 def start_line(result: Any, given: list[float], start: tuple[int, int, int, int]) -> str:

@@ -16,6 +16,7 @@ from typing import Any
 import xarray as xr
 
 from planner.contract.errors import ForecastError
+from planner.forecast.remote import fetch, is_url
 
 # What netCDF4/xarray/pyproj raise on damaged or unexpected files; wrapped into ForecastError.
 LIBRARY_ERRORS = (
@@ -48,9 +49,12 @@ _LAZY_OPEN: dict[str, Any] = (
 
 
 def open_dataset(path: str | os.PathLike[str], what: str) -> tuple[xr.Dataset, str, Path]:
-    """(dataset, label, path) of a forecast or grid file, opened lazily after the completeness check."""
+    """(dataset, label, path) of a forecast or grid file, opened lazily after the completeness check.
+
+    An http(s) URL is read from its copy in the cache (``planner.forecast.remote``); the label stays the URL.
+    """
     label = os.fspath(path)
-    p = Path(label)
+    p = fetch(label).path if is_url(label) else Path(label)  # an http(s) URL: its copy in the cache
     if not p.exists():
         raise ForecastError(f"{label}: {what} not found; check the path")
     if not p.is_file():

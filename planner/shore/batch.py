@@ -110,7 +110,7 @@ def collect(files: list[Path], out_dir: Path, forecast: Path | None) -> list[Bat
     items = []
     for vehicle, path in vehicles:
         mission = load_mission(path)
-        fc = forecast or mission_forecast(mission, out_dir=out_dir)
+        fc = forecast or mission_forecast(mission)
         for g in range(len(mission.goals)):
             request = PlanRequest.for_mission(mission, fc, goal_index=g)
             items.append(BatchItem(vehicle=vehicle, goal_index=g, request=request,

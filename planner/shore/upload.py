@@ -138,7 +138,7 @@ def _plan_goal(mission: Mission, n: int, forecast: Path | None, out: Path, repor
     goal = mission.goals[n].goal
     try:
         if forecast is None:
-            request = PlanRequest.for_mission(mission, mission_forecast(mission, out_dir=out.parent), goal_index=n)
+            request = PlanRequest.for_mission(mission, mission_forecast(mission), goal_index=n)
         else:  # the given forecast replaces the mission's whole forecast section: its step and variables too
             request = replace(PlanRequest.for_mission(mission, forecast, goal_index=n),
                               time_index=None, time_iso=None, variables=None, grid_file=None)
