@@ -37,6 +37,7 @@ from executive.state import (
     VelocityYaw,
 )
 from executive.geofence import inside
+from executive.mode_requests import Progress, progress
 from executive.plausibility import Limits
 from planner.contract.actions import Action
 from planner.contract.settings import BreachAction, OnArrival
@@ -47,8 +48,9 @@ from planner.contract.table import CELL_MARGIN, PolicyTable
 # horizontal thrust, GUIDED holds a position).
 BREACH_MODE: dict[str, SubMode] = {"surface": SubMode.SURFACE, "drift": SubMode.ALT_HOLD, "hold": SubMode.GUIDED}
 # Phases in which an autopilot HEARTBEAT runs the helm too: set-up needs no position message
-# to go on. Once the policy is followed, position and attitude alone drive decisions.
-HEARTBEAT_PHASES = frozenset({Phase.WAIT_LINK, Phase.SETUP, Phase.LINK_LOST, Phase.OVERRIDDEN})
+# to go on. Once the policy is followed, position and attitude alone drive decisions; overridden,
+# the helm commands nothing, and position messages keep its picture of the autopilot's mode current.
+HEARTBEAT_PHASES = frozenset({Phase.WAIT_LINK, Phase.SETUP, Phase.LINK_LOST})
 # Phases in which the autopilot's mode, arming and failsafes are the executive's to watch (docs/executive.md, "Authority").
 _WATCHED = frozenset({Phase.SETUP, Phase.RUNNING, Phase.ARRIVED, Phase.SAFE})
 # Limits that are persistent by construction fire at once; the others must hold for breach_window_s.
@@ -147,6 +149,8 @@ class HelmState:
     activity: Activity | None = None
     target_sent_s: float | None = None
     mode_request_s: float | None = None
+    mode_requested: int | None = None  # the mode last asked for (at mode_request_s)
+    mode_progress: Progress | None = None  # the activity's mode request at the last update (executive.mode_requests)
     arm_request_s: float | None = None
     rates_sent: bool = False  # the rate requests went out in this set-up
     rates_sent_s: float | None = None
@@ -163,6 +167,10 @@ class HelmState:
     stop: Situation | None = None
     breach: Situation | None = None  # a limit exceeded, not yet for breach_window_s
     breach_since_s: float | None = None
+    # Set-up: what it waits for before arming and GUIDED (announced once), since when, and whether it warned.
+    waiting: str | None = None
+    waiting_since_s: float | None = None
+    waiting_warned: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -262,7 +270,7 @@ def step(
 def swapped(helm: HelmState) -> HelmState:
     """The helm as a new table takes over: no activity, so the next decision starts afresh."""
     phase = Phase.RUNNING if helm.phase is Phase.ARRIVED else helm.phase
-    return replace(helm, phase=phase, activity=None, target_sent_s=None, mode_request_s=None)
+    return replace(helm, phase=phase, activity=None, target_sent_s=None, mode_progress=None)
 
 
 def rebooted(helm: HelmState) -> HelmState:
@@ -308,7 +316,14 @@ def _position(vehicle: VehicleState) -> tuple[float, float, float]:
 
 
 def _due(last_s: float | None, now_s: float, period_s: float) -> bool:
-    return last_s is None or now_s - last_s >= period_s or now_s < last_s
+    """``period_s`` has passed since ``last_s``. A clock that went back makes nothing due early: a request
+    goes out at most once per period, whatever the time handed in does (a reboot starts the helm afresh)."""
+    return last_s is None or now_s - last_s >= period_s
+
+
+def _mode_due(helm: HelmState, mode: SubMode, now_s: float, config: HelmConfig) -> bool:
+    """Whether to ask for ``mode`` now: another mode than the last asked for at once, the same again every retry_s."""
+    return helm.mode_requested != int(mode) or _due(helm.mode_request_s, now_s, config.retry_s)
 
 
 def _link_lost(helm: HelmState, config: HelmConfig, now_s: float, out: _Out) -> Tick:
@@ -330,7 +345,8 @@ def _authority(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s
     """Yield to a mode, a disarm or a failsafe the executive did not command (docs/executive.md, "Authority").
 
     ArduSub changes mode by itself in one case the executive causes: SURFACE becomes ALT_HOLD
-    once at the surface (mode reason SURFACE_COMPLETE); that is not an override.
+    once at the surface (mode reason SURFACE_COMPLETE); that is not an override, also when the
+    HEARTBEAT that read SURFACE was missed (asked at the surface, it ends at once).
     """
     asked = tuple((m, t) for m, t in helm.asked_modes if now_s - t <= config.authority_window_s and t <= now_s)
     mode, armed, failsafe = vehicle.mode, vehicle.armed, vehicle.autopilot_failsafe
@@ -339,7 +355,8 @@ def _authority(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s
         wanted = helm.activity.mode if helm.activity is not None else None
         if (helm.seen_mode is not None and mode is not None and mode != helm.seen_mode and mode != wanted
                 and all(m != mode for m, _ in asked)
-                and not (helm.seen_mode == SubMode.SURFACE and mode == SubMode.ALT_HOLD)):
+                and not (mode == SubMode.ALT_HOLD and (helm.seen_mode == SubMode.SURFACE
+                                                        or any(m == SubMode.SURFACE for m, _ in asked)))):
             why = f"the autopilot's mode became {_mode_name(mode)} (from {_mode_name(helm.seen_mode)}), not asked for"
         elif helm.seen_armed and not armed:
             why = "the autopilot was disarmed, not asked for"
@@ -353,7 +370,9 @@ def _authority(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s
     return replace(helm, phase=Phase.OVERRIDDEN, overridden=why, activity=None, target_sent_s=None)
 
 
-def _mode_name(mode: int) -> str:
+def _mode_name(mode: int | None) -> str:
+    if mode is None:
+        return "no mode yet"
     try:
         return SubMode(mode).name
     except ValueError:
@@ -364,7 +383,7 @@ def _ask_mode(helm: HelmState, mode: SubMode, now_s: float, out: _Out) -> HelmSt
     """Send a mode request and remember it, so the change it brings is not taken for an override."""
     out.commands.append(SetMode(mode))
     asked = (*helm.asked_modes[-7:], (int(mode), now_s))
-    return replace(helm, mode_request_s=now_s, asked_modes=asked)
+    return replace(helm, mode_request_s=now_s, mode_requested=int(mode), asked_modes=asked)
 
 
 def _rates(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:
@@ -389,21 +408,62 @@ def _rates(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: fl
 def _setup(
     helm: HelmState, vehicle: VehicleState, table: PolicyTable | None, config: HelmConfig, now_s: float, out: _Out
 ) -> HelmState:
-    if not vehicle.has_position:
+    helm = _await_position(helm, vehicle, config, now_s, out)
+    if helm.waiting is not None:
         return helm
     if helm.stop is not None:  # a safety stop that outlived a reboot or a restart: straight to it
         return replace(helm, phase=Phase.SAFE, activity=None)
     if table is None:
         return replace(helm, phase=Phase.RUNNING)  # "no table" is handled there: surface
-    if vehicle.mode != SubMode.GUIDED and _due(helm.mode_request_s, now_s, config.retry_s):
-        helm = _ask_mode(helm, SubMode.GUIDED, now_s, out)  # refused until the position estimate exists
+    if vehicle.mode != SubMode.GUIDED and _mode_due(helm, SubMode.GUIDED, now_s, config):
+        helm = _ask_mode(helm, SubMode.GUIDED, now_s, out)
     if not vehicle.armed and _due(helm.arm_request_s, now_s, config.retry_s):
         out.commands.append(Arm(True))
         helm = replace(helm, arm_request_s=now_s)
-    if vehicle.armed and vehicle.mode == SubMode.GUIDED:
+    if progress(SubMode.GUIDED, vehicle, None, surface_depth_m=config.depth_tolerance_m) is Progress.COMPLETE:
         start = helm.mission_start_s if helm.mission_start_s is not None else now_s
         out.events.append(Event("info", "armed in GUIDED: following the policy"))
         helm = replace(helm, phase=Phase.RUNNING, mission_start_s=start, activity=None)
+    return helm
+
+
+def _awaited(vehicle: VehicleState) -> str | None:
+    """What set-up still waits for before it asks for GUIDED and arms; None when nothing.
+
+    ArduSub refuses GUIDED ("GUIDED requires position") until its EKF has an absolute horizontal
+    position, about 41 s after boot in SITL, and sends lat = lon = 0 before its GPS is found; the
+    EKF_POS_HORIZ_ABS flag of EKF_STATUS_REPORT says when (the SYS_STATUS pre-arm bit comes earlier and
+    is not enough). An autopilot that never sends EKF_STATUS_REPORT is waited for too, with a warning.
+    """
+    if not vehicle.ekf_reported:
+        return "the EKF's absolute position (no EKF_STATUS_REPORT from the autopilot yet)"
+    if not vehicle.position_ok:
+        return "the EKF's absolute position (EKF_STATUS_REPORT without EKF_POS_HORIZ_ABS)"
+    if not vehicle.has_position:
+        return "a position (GLOBAL_POSITION_INT) that passes the checks"
+    return None
+
+
+def _await_position(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: float, out: _Out) -> HelmState:
+    """Set-up waits for a position the EKF vouches for: announced once, and a warning once it has waited too long."""
+    awaited = _awaited(vehicle)
+    if awaited is None:
+        if helm.waiting is not None:
+            out.events.append(Event("info", "set-up: the EKF has an absolute position: asking for GUIDED and arming"))
+            helm = replace(helm, waiting=None, waiting_since_s=None, waiting_warned=False)
+        return helm
+    if awaited != helm.waiting:
+        out.events.append(Event("info", f"set-up: waiting for {awaited} before arming and asking for GUIDED"))
+        helm = replace(helm, waiting=awaited)
+    if helm.waiting_since_s is None:
+        if vehicle.time_s > 0.0:  # timed from the first message with time_boot_ms (a HEARTBEAT before it is at 0 s)
+            helm = replace(helm, waiting_since_s=now_s)
+        return helm
+    if not helm.waiting_warned and now_s - helm.waiting_since_s >= config.position_timeout_s:
+        out.events.append(Event("warning", f"not started: waited {now_s - helm.waiting_since_s:.0f} s for {awaited};"
+                                           " the executive arms and asks for GUIDED only once the autopilot's EKF"
+                                           " reports an absolute horizontal position (EKF_POS_HORIZ_ABS)"))
+        helm = replace(helm, waiting_warned=True)
     return helm
 
 
@@ -465,7 +525,7 @@ def _choose(
         out.events.append(Event("error", f"safety stop ({helm.stop.value}) holds until an operator clears it"
                                          f" (MAV_CMD_MISSION_START): on_breach {config.on_breach}"))
         act = _breach(helm.stop, vehicle, config, now_s)
-        return replace(helm, activity=act, target_sent_s=None, mode_request_s=None), True
+        return replace(helm, activity=act, target_sent_s=None, mode_progress=None), True
     breach = _safety(helm, vehicle, config, now_s)
     helm = _persisting(helm, breach, config, now_s, out)
     if breach is not None and (breach[0] in _AT_ONCE or helm.breach_since_s is not None
@@ -474,7 +534,7 @@ def _choose(
         out.events.append(Event("error", f"{text}: on_breach {config.on_breach}, plan suspended until an operator"
                                          " clears the safety stop (MAV_CMD_MISSION_START)"))
         act = _breach(situation, vehicle, config, now_s)
-        return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_request_s=None, stop=situation,
+        return replace(helm, phase=Phase.SAFE, activity=act, target_sent_s=None, mode_progress=None, stop=situation,
                        breach=None, breach_since_s=None), True
     if helm.phase is Phase.ARRIVED and current is not None:
         return helm, False
@@ -525,7 +585,7 @@ def _switch(helm: HelmState, current: Activity | None, new: Activity, out: _Out,
         out.events.append(Event("info" if new.situation is Situation.AT_GOAL else "warning", text))
     elif text is None and current is not None and current.situation is not Situation.FOLLOWING:
         out.events.append(Event("info", f"back on the plan ({current.situation.value} cleared)"))
-    return replace(helm, activity=new, target_sent_s=None, mode_request_s=None), True
+    return replace(helm, activity=new, target_sent_s=None, mode_progress=None), True
 
 
 def _action_activity(action: Action, state: tuple[int, int, int, int], table: PolicyTable, config: HelmConfig, now_s: float) -> Activity:
@@ -566,8 +626,14 @@ def _realise(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: 
     if act.mode is not SubMode.SURFACE and not vehicle.armed and _due(helm.arm_request_s, now_s, config.retry_s):
         out.commands.append(Arm(True))
         helm = replace(helm, arm_request_s=now_s)
-    if vehicle.mode != act.mode:
-        if _due(helm.mode_request_s, now_s, config.retry_s):
+    done = progress(act.mode, vehicle, helm.mode_progress, surface_depth_m=config.depth_tolerance_m)
+    if done is not helm.mode_progress:
+        if done is Progress.COMPLETE and act.mode is SubMode.SURFACE:  # never asked again while this activity lasts
+            out.events.append(Event("info", "at the surface: SURFACE complete (the autopilot reports"
+                                            f" {_mode_name(vehicle.mode)})"))
+        helm = replace(helm, mode_progress=done)
+    if done is Progress.ASK:
+        if _mode_due(helm, act.mode, now_s, config):
             helm = _ask_mode(helm, act.mode, now_s, out)
         return helm
     if act.target is not None and _due(helm.target_sent_s, now_s, config.refresh_s):

@@ -246,18 +246,18 @@ def apply(vehicle: VehicleState, msg: Any, now_s: float) -> VehicleState:
         depth_m = max(0.0, -msg.relative_alt / 1000.0)  # relative_alt is negative below the surface
         return VehicleState(msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, depth_m, heading, v.mode, v.armed,
                             v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s, v.interval_acks,
-                            v.position_s, v.autopilot_failsafe)
+                            v.position_s, v.autopilot_failsafe, v.ekf_reported)
     if kind == "ATTITUDE":
         return VehicleState(msg.time_boot_ms / 1000.0, v.lat_deg, v.lon_deg, v.depth_m, math.degrees(msg.yaw) % 360.0,
                             v.mode, v.armed, v.position_ok, v.battery_pct, v.energy_used_wh, v.heartbeat_s,
-                            v.interval_acks, v.position_s, v.autopilot_failsafe)
+                            v.interval_acks, v.position_s, v.autopilot_failsafe, v.ekf_reported)
     if kind == "HEARTBEAT":
         armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
         # ArduPilot reports MAV_STATE_CRITICAL while one of its failsafes is active (GCS, battery, ...).
         failsafe = msg.system_status == mavlink.MAV_STATE_CRITICAL
         return replace(vehicle, mode=int(msg.custom_mode), armed=armed, heartbeat_s=now_s, autopilot_failsafe=failsafe)
     if kind == "EKF_STATUS_REPORT":
-        return replace(vehicle, position_ok=bool(msg.flags & mavlink.EKF_POS_HORIZ_ABS))
+        return replace(vehicle, position_ok=bool(msg.flags & mavlink.EKF_POS_HORIZ_ABS), ekf_reported=True)
     if kind == "BATTERY_STATUS":
         pct = None if msg.battery_remaining < 0 else float(msg.battery_remaining)
         wh = None if msg.energy_consumed < 0 else msg.energy_consumed / 36.0  # hJ -> Wh

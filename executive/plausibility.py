@@ -7,9 +7,11 @@ the last accepted value by more than the vehicle and the current can do (a 50 km
 dropped; it is believed only when ``persist_samples`` such samples in a row agree with each
 other, so one bad sample never decides anything, while a real change (a GPS reset at the
 surface, a battery that really failed) is taken after a few samples (docs/executive.md,
-"Bad samples"). While the EKF says its horizontal position is not absolute
-(EKF_STATUS_REPORT without EKF_POS_HORIZ_ABS), positions are not used. A heading that stays
-unknown for ``persist_samples`` samples becomes unknown (None), never a number.
+"Bad samples"). A position is used only while the EKF's latest EKF_STATUS_REPORT has
+EKF_POS_HORIZ_ABS: before the first such report (ArduSub: about 41 s after boot) none is, and
+the drops before the first accepted position are counted without a warning each (set-up says
+what it waits for). A heading that stays unknown for ``persist_samples`` samples becomes
+unknown (None), never a number.
 
 Pure functions on frozen values: the loop and the decision audit run the same ``screen``.
 """
@@ -61,13 +63,12 @@ class Channel:
 
 @dataclass(frozen=True, slots=True)
 class Gate:
-    """The checks' state: a channel per field, and whether the EKF has reported at all."""
+    """The checks' state: a channel per field."""
 
     position: Channel = Channel()
     depth: Channel = Channel()
     heading: Channel = Channel()
     battery: Channel = Channel()
-    ekf_reported: bool = False
     dropped: int = 0  # samples dropped so far (counted, logged at the first of each run)
 
 
@@ -87,8 +88,6 @@ def screen(gate: Gate, before: VehicleState, after: VehicleState, kind: str, lim
     events: list[Event] = []
     if time_s is not None and kind in ("GLOBAL_POSITION_INT", "ATTITUDE"):
         after = replace(after, time_s=time_s)
-    if kind == "EKF_STATUS_REPORT":
-        gate = replace(gate, ekf_reported=True)
     t = after.time_s
     vehicle = after
     if kind == "GLOBAL_POSITION_INT":
@@ -113,13 +112,17 @@ def _position(gate: Gate, before: VehicleState, v: VehicleState, t: float, limit
         reason = f"position {lat}, {lon} is not a position"
     elif lat == 0.0 and lon == 0.0:
         reason = "position 0, 0: no fix"
-    elif gate.ekf_reported and not v.position_ok:
-        reason = "the EKF reports no absolute horizontal position"
+    elif not v.position_ok:
+        reason = ("the EKF reports no absolute horizontal position" if v.ekf_reported
+                  else "no EKF_STATUS_REPORT with EKF_POS_HORIZ_ABS yet")
+    # Before any position was accepted, no fix and no EKF position are the autopilot starting up, not
+    # faults: counted without a warning (set-up announces what it waits for).
+    starting = reason is not None and gate.position.value is None and not reason.endswith("is not a position")
     ch, verdict, text = _judge(gate.position, (lat, lon), t, reason, _distance_m, limits.max_ground_speed_m_s,
                                limits.position_noise_m, limits.persist_samples, "m")
     gate = replace(gate, position=ch)
     if verdict == "drop":
-        gate = _count(gate, text, "position", events)
+        gate = _count(gate, text, "position", events, quiet=starting)
         return gate, replace(v, lat_deg=before.lat_deg, lon_deg=before.lon_deg, position_s=before.position_s)
     if text is not None:
         events.append(Event("warning", f"position: {text}"))
@@ -257,11 +260,11 @@ def _judge(ch: Channel, sample: tuple[float, ...], t: float, reason: str | None,
     return replace(ch, doubt=sample, doubt_time_s=t, doubts=doubts, invalid=0), "drop", text
 
 
-def _count(gate: Gate, text: str | None, what: Field, events: list[Event]) -> Gate:
+def _count(gate: Gate, text: str | None, what: Field, events: list[Event], *, quiet: bool = False) -> Gate:
     """Count a dropped sample; the first of a run is logged (the rest would flood the log at 2 Hz)."""
     ch: Channel = getattr(gate, what)
     first = ch.invalid + ch.doubts <= 1
-    if first:
+    if first and not quiet:
         events.append(Event("warning", f"{what} sample dropped: {text}"))
     return replace(gate, dropped=gate.dropped + 1)
 

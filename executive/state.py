@@ -57,13 +57,14 @@ class VehicleState:
     heading_deg: float | None = None  # compass, clockwise from north
     mode: int | None = None  # HEARTBEAT.custom_mode (SubMode when known)
     armed: bool = False
-    position_ok: bool = False  # EKF_STATUS_REPORT has EKF_POS_HORIZ_ABS
+    position_ok: bool = False  # the latest EKF_STATUS_REPORT has EKF_POS_HORIZ_ABS: positions are used only then
     battery_pct: float | None = None
     energy_used_wh: float | None = None
     heartbeat_s: float | None = None  # vehicle time of the last autopilot HEARTBEAT
     interval_acks: int = 0  # COMMAND_ACKs accepting MAV_CMD_SET_MESSAGE_INTERVAL so far
     position_s: float | None = None  # vehicle time of the last position that passed the checks (executive.plausibility)
     autopilot_failsafe: bool = False  # the autopilot's HEARTBEAT says MAV_STATE_CRITICAL: one of its failsafes is on
+    ekf_reported: bool = False  # an EKF_STATUS_REPORT has arrived since boot (set-up says what it waits for)
 
     @property
     def has_position(self) -> bool:

@@ -53,6 +53,7 @@ class Dive:
         out = []
         for _ in range(n):
             self.ap.heartbeat(status)
+            self.ap.ekf(position_ok=True)  # as ArduSub streams it (positions are used only with its flag)
             for _ in range(2):
                 self.ap.position(self.lat, self.lon, self.depth if depth_m is None else depth_m, self.heading, dt_ms=500)
                 self.ap.attitude(math.radians(self.heading))

@@ -178,7 +178,8 @@ def test_a_heading_that_stays_nan_is_unknown_and_nothing_is_steered_by_it(demo_p
 
 def test_screen_takes_a_change_only_after_persist_samples_agree():
     limits = Limits()
-    v0 = VehicleState(time_s=1.0, lat_deg=33.4, lon_deg=-117.8, depth_m=5.0, heading_deg=90.0, battery_pct=80.0)
+    v0 = VehicleState(time_s=1.0, lat_deg=33.4, lon_deg=-117.8, depth_m=5.0, heading_deg=90.0, battery_pct=80.0,
+                      position_ok=True, ekf_reported=True)
     gate = screen(Gate(), VehicleState(), v0, "GLOBAL_POSITION_INT", limits).gate
     v = v0
     kept = []

@@ -52,6 +52,7 @@ def _go(ap: Autopilot, table, state, *, heading=None) -> None:  # type: ignore[n
     l, j, i, k = state
     lat, lon = table.cell_centre(j, i)
     ap.heartbeat()
+    ap.ekf(position_ok=True)  # the EKF has its absolute position: set-up arms and asks for GUIDED only then
     ap.position(lat, lon, table.depth_m[l], table.bearing_deg(j, k) if heading is None else heading)
 
 

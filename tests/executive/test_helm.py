@@ -48,7 +48,7 @@ def _vehicle_at(table: PolicyTable, state: tuple[int, int, int, int], **kw) -> V
     l, j, i, k = state
     lat, lon = table.cell_centre(j, i)
     base = dict(time_s=100.0, lat_deg=lat, lon_deg=lon, depth_m=table.depth_m[l], heading_deg=table.bearing_deg(j, k),
-                mode=int(SubMode.GUIDED), armed=True, position_ok=True, heartbeat_s=100.0,
+                mode=int(SubMode.GUIDED), armed=True, position_ok=True, ekf_reported=True, heartbeat_s=100.0,
                 interval_acks=len(CONFIG.rates))  # the autopilot accepted every rate asked for
     base.update(kw)
     return VehicleState(**base)  # type: ignore[arg-type]

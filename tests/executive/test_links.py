@@ -94,6 +94,7 @@ def test_the_autopilot_link_locks_to_the_autopilots_address(tmp_path: Path):
         assert wait_until(lambda: autopilot.read() is not None and autopilot.peer is not None, 10)
         exec_addr = autopilot.peer
         autopilot.send(_heartbeat(autopilot.mav))
+        autopilot.send(autopilot.mav.ekf_status_report_encode(mavlink.EKF_POS_HORIZ_ABS, 0, 0, 0, 0, 0))  # positions used
         autopilot.send(_position(autopilot.mav, 10_000, 33.5, -118.0))
         assert wait_until(lambda: ex.vehicle.time_s == 10.0, 10), ex.vehicle
         # From another port, valid frames as system 1: a heartbeat and a position far away, newer.

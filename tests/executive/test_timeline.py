@@ -114,6 +114,8 @@ class Vehicle:
         base = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED
         self._feed(self.mav.heartbeat_encode(mavlink.MAV_TYPE_SUBMARINE, mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
                                              int(SubMode.GUIDED), mavlink.MAV_STATE_ACTIVE))
+        # The EKF has its absolute position, as ArduSub streams it (positions are used only then).
+        self._feed(self.mav.ekf_status_report_encode(mavlink.EKF_ATTITUDE | mavlink.EKF_POS_HORIZ_ABS, 0, 0, 0, 0, 0))
 
     def system_time(self, unix_s: float) -> None:
         self._feed(self.mav.system_time_encode(round(unix_s * 1e6), self.time_ms))
@@ -202,7 +204,8 @@ def test_after_an_autopilot_reboot_the_utc_time_is_unknown_until_the_next_system
         v.time_ms = 1_000  # time went back: the old boot's UTC offset says nothing of the new one
         for _ in range(3):  # a reboot is believed once three timestamps in a row agree (executive.plausibility)
             v.position()
-        v.heartbeat()  # set-up again, with the position: a decision at once
+        v.heartbeat()  # set-up again: the EKF's flag, then a position: a decision at once
+        v.position()
         v.system_time(T0 + 600.0 + v.time_ms / 1000.0)  # UTC again: nearest to the first slice
         v.position()
     finally:

@@ -118,7 +118,7 @@ class Stepped:
     """
 
     def __init__(self, table, log_path: Path, helm: HelmConfig | None = None, state_dir: Path | None = None,  # type: ignore[no-untyped-def]
-                 **executive) -> None:
+                 ekf_ready: bool = True, **executive) -> None:
         self.ap = Autopilot()
         self.ap.mode, self.ap.armed = SubMode.GUIDED, True
         self.log_path = log_path
@@ -128,6 +128,9 @@ class Stepped:
         self._wall0 = time.monotonic()
         self.executive._heartbeat(self._wall0)  # udpout speaks first: the autopilot learns the executive's address
         assert self.ap.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=5.0) is not None
+        if ekf_ready:  # a running autopilot's EKF has its position (positions are used only then)
+            self.ap.ekf(position_ok=True)
+            self.pump()
         self.gcs = ardupilotmega.MAVLink(None, srcSystem=255, srcComponent=190)  # a GCS behind the autopilot
 
     def pump(self) -> list:  # type: ignore[type-arg]
