@@ -7,7 +7,8 @@ and dropped unparsed; a warning about them is due at most once per ``signing.Ref
 period (10 s of wall time), with the count since the last one. A datagram identical to one of
 the last few from the autopilot is a duplicate (every MAVLink frame carries a sequence number,
 so a new datagram never repeats a recent one): a lockstep simulator's resent step, or the
-network's. Other links (TCP, serial) pass through unchanged.
+network's. Other links (TCP, serial) are streams: read in whole buffers (``read``), never locked or
+filtered; the peer closing one (``closed``) is a lost link at once.
 """
 
 from __future__ import annotations
@@ -38,6 +39,28 @@ class LinkGuard:
     @property
     def locked(self) -> tuple[str, int] | None:
         return self.conn.locked if self.udp else None
+
+    @property
+    def closed(self) -> bool:
+        """The peer closed the stream (TCP end of stream or reset, a serial device gone): a lost link at once."""
+        return bool(getattr(self.conn, "closed", False))
+
+    @property
+    def fd(self) -> int | None:
+        """What to wait on for input: None once a connection is closed for good (its end of stream reads
+        ready for ever); a listening link waits for its next client."""
+        return None if self.closed and not hasattr(self.conn, "listen") else self.conn.fd
+
+    def read(self) -> bytes:
+        """What waits on the link: one datagram (UDP), or all that waits of a stream, up to
+        ``mavlink_bridge.STREAM_READ_BYTES`` (b"" when nothing does)."""
+        if self.udp:
+            return self.conn.recv()
+        try:
+            return self.conn.recv(bridge.STREAM_READ_BYTES) or b""
+        except OSError:  # a serial device gone (pyserial's SerialException is an OSError)
+            self.conn.closed = True
+            return b""
 
     def admit(self, data: bytes) -> bool:
         """Whether the datagram just read goes on to the parser (False: from elsewhere, or a repeat)."""
@@ -81,6 +104,8 @@ class LinkGuard:
 
     def input_waiting(self) -> bool:
         """Datagrams from the autopilot wait unread (those from elsewhere are read and counted here)."""
+        if self.fd is None:
+            return False
         while True:
             ready, _, _ = select.select([self.conn.fd], [], [], 0)
             if not ready or self.locked is None:

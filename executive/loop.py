@@ -122,6 +122,9 @@ class Executive(PlanChanges):
         self.link = LinkGuard(self.conn, config.autopilot_system)  # locked to the autopilot once heard
         self.lockstep = False  # the autopilot asked for progress reports (a TIMESYNC request: a lockstep simulator)
         self.progress_reports = 0  # lockstep reports sent (bridge.progress_report)
+        self._reported_s = 0.0  # the vehicle time of the last report
+        self._closed_said = False  # the autopilot link's close was announced
+        self._jumped_s = 0.0  # vehicle time of the last timestamp that jumped past the link-loss timeout
         self.mav = bridge.new_mav(self.conn, streams=self.streams, link_id=signing.LINK_ID_AUTOPILOT)
         self.gcs = None
         if config.gcs_link is not None:
@@ -199,8 +202,6 @@ class Executive(PlanChanges):
     def run(self, stop: Any = None) -> RunSummary:
         """Loop until ``stop.is_set()``, arrival (when configured) or a time limit."""
         wall0 = time.monotonic()
-        fd = self.conn.fd
-        fds = [fd] if self.gcs is None else [fd, self.gcs.fd]
         try:
             self._heartbeat(wall0)
             while self._stop_reason is None:
@@ -209,8 +210,12 @@ class Executive(PlanChanges):
                     break
                 wall = time.monotonic()
                 wait = min(_POLL_S, self._wall_to_heartbeat(wall))
-                ready, _, _ = select.select(fds, [], [], wait)
-                if fd in ready:
+                fd = self.link.fd  # a listening TCP link's changes with its client; None once closed
+                fds = [f for f in (fd, None if self.gcs is None else self.gcs.fd) if f is not None]
+                ready = select.select(fds, [], [], wait)[0] if fds else []
+                if not fds:
+                    time.sleep(wait)
+                if fd is not None and fd in ready:
                     self._drain(time.monotonic())
                 if self.gcs is not None and self.gcs.fd in ready:
                     self._drain_gcs()
@@ -240,7 +245,7 @@ class Executive(PlanChanges):
         # Then one lockstep report: everything from the autopilot up to this vehicle time is handled.
         deadline = wall + min(_DRAIN_BUDGET_S, self._wall_to_heartbeat(wall))
         while True:
-            data = self.conn.recv()
+            data = self.link.read()  # a datagram, or all that waits of a stream (TCP, serial)
             if not data:
                 break
             if not self.link.admit(data):  # from elsewhere, or a repeat
@@ -271,7 +276,11 @@ class Executive(PlanChanges):
                     self.message_cost.add(time.perf_counter() - t0)
             if wall >= deadline:
                 break
-        self._report_progress(time.monotonic())
+        wall = time.monotonic()
+        if self._wall_to_heartbeat(wall) <= 0.0:
+            self._heartbeat(wall)  # due (vehicle time jumped on): sent before the report, which it carries, so
+        else:                      # that a simulator in lockstep never steps past the executive's heartbeat
+            self._report_progress(wall)
 
     def _drain_gcs(self) -> None:
         """Ground-station traffic: uploads only, never a decision; bounded like ``_drain``."""
@@ -384,12 +393,18 @@ class Executive(PlanChanges):
             # 0 s. Move it to the vehicle's time base, or an autopilot that booted more than the
             # link-loss timeout ago would look silent at once.
             self.vehicle = replace(self.vehicle, heartbeat_s=t_boot)
+        if (mine and t_boot is not None and self.clock.synced
+                and t_boot - self.clock.now_s(wall) > self.config.helm.link_loss_timeout_s):
+            # Vehicle time jumped past the timeout: a simulator that ran on at its speedup through a silence the
+            # clock timed at real time. The link is back; the heartbeat gets the timeout from here to follow.
+            self._jumped_s = t_boot
         if mine and t_boot is not None and self.clock.observe(t_boot, wall):
             self._event(t_boot, Event("warning", "autopilot time went back: it rebooted; setting up again"))
             self.vehicle = VehicleState()
             self.helm = rebooted(self.helm)  # a safety stop or an override outlives the reboot
             self.gate = plausibility.Gate()
             self._last_time.clear()
+            self._jumped_s = 0.0
             self._unix_offset_s = None  # relative to the old boot: UTC is unknown until the next SYSTEM_TIME
         now_s = self.clock.now_s(wall)
         if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
@@ -430,7 +445,7 @@ class Executive(PlanChanges):
         """The message's continuous vehicle time, or None when the checks drop it (``plausibility.stamp``)."""
         last = max(self._last_time.values(), default=None)
         stamped = plausibility.stamp(self.boot, raw_s, last_s=last,
-                                     expected_s=self.clock.now_s(wall) if self.clock.synced else None,
+                                     expected_s=self.clock.latest_s(wall) if self.clock.synced else None,
                                      rate=self.clock.rate, wall_s=wall, limits=self.helm_config.limits)
         first_doubt = stamped.verdict == "drop" and self.boot.doubts == 0
         self.boot = stamped.boot
@@ -581,8 +596,15 @@ class Executive(PlanChanges):
             self._heartbeat(wall)
         now_s = self.clock.now_s(wall)
         hb = self.vehicle.heartbeat_s
-        if hb is not None and now_s - hb > self.config.helm.link_loss_timeout_s and not self._input_waiting():
+        closed = self.link.closed  # the autopilot's side closed the stream: a lost link, no silence to wait out
+        if closed and not self._closed_said:
+            self._event(now_s, Event("error", f"autopilot link closed by the other end ({self.config.link})"))
+        self._closed_said = closed
+        if closed or (hb is not None and now_s - max(hb, self._jumped_s) > self.config.helm.link_loss_timeout_s
+                      and not self._input_waiting()):
             self._tick(now_s, link_ok=False)
+        if self.lockstep and now_s > self._reported_s:
+            self._report_progress(wall)  # through a silence: the simulator follows the clock (docs/executive.md)
         for mav, msg in self.uploads.tick(wall):  # mission protocol retries
             self._send_on(mav, now_s, msg)
         self._replanning(now_s, wall)
@@ -614,7 +636,8 @@ class Executive(PlanChanges):
         once the autopilot has asked for one. Not logged: it paces a simulator and says nothing about the vehicle.
         """
         if self.lockstep:
-            self.mav.send(bridge.progress_report(self.mav, self.clock.now_s(wall)))
+            self._reported_s = self.clock.now_s(wall)
+            self.mav.send(bridge.progress_report(self.mav, self._reported_s))
             self.progress_reports += 1
 
     def _warn_link(self) -> None:

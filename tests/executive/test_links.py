@@ -62,10 +62,10 @@ class Endpoint:
 
 
 class Running:
-    """An executive in a thread; ``stop`` ends it and closes its links."""
+    """An executive (given, or made with no table) in a thread; ``stop`` ends it and closes its links."""
 
-    def __init__(self, config: ExecConfig) -> None:
-        self.executive = Executive(config, None)
+    def __init__(self, config: ExecConfig | Executive) -> None:
+        self.executive = config if isinstance(config, Executive) else Executive(config, None)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self.executive.run, args=(self._stop,), daemon=True)
         self._thread.start()
