@@ -3,7 +3,8 @@
 ``load_dive`` turns a ``DiveLog`` into a ``Dive``: the track (one row per
 decision: vehicle time, wall time, position, heading, situation, action, the
 table's state, energy and battery), the plan changes (``/executive/policy``)
-and the events (``/log``). Summary, report, export and re-stream all start from
+and the events (``/log``), and what the autopilot said (STATUSTEXT, HEARTBEAT states:
+``planner.shore.replay.autopilot``). Summary, report, export and re-stream all start from
 it. numpy and the standard library only.
 """
 
@@ -16,9 +17,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.shore.replay.autopilot import AutopilotLog, AutopilotReader
 from planner.shore.replay.divelog import DiveLog
+from planner.shore.replay.track_filter import WINDOW_S, FilteredTrack, filter_track, path_length_m
 from executive.recorder import LogLevel, Topic
-from planner.contract.geodesy import EARTH_RADIUS_M
 
 __all__ = ["Dive", "Event", "Segment", "Track", "load_dive", "path_length_m"]
 
@@ -57,8 +59,16 @@ class Track:
                 start = row
         return out
 
-    def distance_m(self) -> float:
-        """Distance over ground along the positions, great circles between rows (spec section 1 radius)."""
+    def filtered(self, window_s: float = WINDOW_S) -> FilteredTrack:
+        """The positions without their noise (``track_filter.filter_track``: medians over ``window_s``)."""
+        return filter_track(self.time_s, self.lat_deg, self.lon_deg, self.depth_m, window_s=window_s)
+
+    def distance_m(self, window_s: float = WINDOW_S) -> float:
+        """Distance over ground along the filtered track, great circles between its points (spec section 1 radius)."""
+        return self.filtered(window_s).length_m()
+
+    def fix_distance_m(self) -> float:
+        """Great circles between every decision's position: the noise of each fix adds to it."""
         return path_length_m(self.lat_deg, self.lon_deg)
 
 
@@ -70,16 +80,6 @@ class Segment:
     stop: int
     table_crc32: str | None
     goal_index: int
-
-
-def path_length_m(lat_deg: NDArray[np.float64], lon_deg: NDArray[np.float64]) -> float:
-    """Sum of haversine distances between consecutive finite points, in metres."""
-    ok = np.isfinite(lat_deg) & np.isfinite(lon_deg)
-    lat, lon = np.radians(lat_deg[ok]), np.radians(lon_deg[ok])
-    if lat.size < 2:
-        return 0.0
-    a = np.sin(np.diff(lat) / 2) ** 2 + np.cos(lat[:-1]) * np.cos(lat[1:]) * np.sin(np.diff(lon) / 2) ** 2
-    return float(np.sum(2 * EARTH_RADIUS_M * np.arcsin(np.sqrt(np.minimum(a, 1.0)))))
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +99,7 @@ class Dive:
     # UTC (Unix s) = vehicle time + this, from the autopilot's first SYSTEM_TIME with UTC; after an
     # autopilot reboot (vehicle time restarts) later times are off by the uptime before it.
     unix_offset_s: float | None
+    autopilot: AutopilotLog = AutopilotLog()  # its STATUSTEXT and HEARTBEAT states
 
     def utc_s(self, time_s: float | NDArray[np.float64]) -> float | NDArray[np.float64] | None:
         """Unix time of vehicle time ``time_s``, or None when the autopilot never sent UTC."""
@@ -120,12 +121,16 @@ def load_dive(log: DiveLog) -> Dive:
     table: str | None = None
     states = 0
     offset: float | None = None
+    autopilot = AutopilotReader()
     topics = (Topic.DECISION, Topic.STATE, Topic.POLICY, Topic.LOG, Topic.MAVLINK_RX)
-    for m in log.messages(topics, containing={Topic.MAVLINK_RX: b'"name":"SYSTEM_TIME"'}):
+    wanted = (b'"name":"SYSTEM_TIME"', b'"name":"STATUSTEXT"', b'"name":"HEARTBEAT"')
+    for m in log.messages(topics, containing={Topic.MAVLINK_RX: wanted}):
         p = m.payload
         if m.topic is Topic.MAVLINK_RX:
             fields = p.get("fields", {})
-            if offset is None and fields.get("time_unix_usec", 0) > 0:
+            if p.get("name") != "SYSTEM_TIME":
+                autopilot.feed(m.log_time_s, p)
+            elif offset is None and fields.get("time_unix_usec", 0) > 0:
                 offset = fields["time_unix_usec"] / 1e6 - fields.get("time_boot_ms", 0) / 1e3
         elif m.topic is Topic.DECISION:
             rows["time_s"].append(_num(p.get("time_s", m.log_time_s)))
@@ -165,7 +170,8 @@ def load_dive(log: DiveLog) -> Dive:
         goal_index=np.asarray(rows["goal"], np.int64), changed=np.asarray(rows["changed"], bool),
         table_crc32=tuple(rows["table"]),
     )
-    return Dive(log=log, track=track, policy=tuple(policy), events=tuple(events), states=states, unix_offset_s=offset)
+    return Dive(log=log, track=track, policy=tuple(policy), events=tuple(events), states=states, unix_offset_s=offset,
+                autopilot=autopilot.result())
 
 
 def _num(value: Any, default: float = math.nan) -> float:

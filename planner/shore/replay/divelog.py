@@ -92,12 +92,13 @@ class DiveLog:
             parts.append(f"the record at byte {self.end_byte:,} is unreadable though the file goes on to its footer")
         return "" if not parts else f"DAMAGED: {'; '.join(parts)}; what could not be read is missing from this replay"
 
-    def messages(self, topics: Iterable[Topic] | None = None, *, containing: Mapping[Topic, bytes] | None = None,
+    def messages(self, topics: Iterable[Topic] | None = None, *,
+                 containing: Mapping[Topic, bytes | tuple[bytes, ...]] | None = None,
                  keep_undecodable: bool = False) -> Iterator[LogMessage]:
         """The messages on ``topics`` (default all known ones), in file order, each checked (``payloads``).
 
         ``containing`` keeps, on the topics it names, only messages whose JSON holds
-        those bytes (e.g. ``b'"name":"SYSTEM_TIME"'``): a cheap filter before decoding.
+        those bytes (e.g. ``b'"name":"SYSTEM_TIME"'``), or any of a tuple of them: a cheap filter before decoding.
         ``keep_undecodable``: MAVLink records whose fields do not fit the dialect come as logged
         (for the re-stream, which skips them by name) instead of raising ``LogError``.
         """
@@ -108,7 +109,8 @@ class DiveLog:
             if topic is None or topic not in wanted or channel.message_encoding != "json":
                 continue
             needle = filters.get(topic)
-            if needle is not None and needle not in message.data:
+            if needle is not None and not any(n in message.data for n in ((needle,) if isinstance(needle, bytes)
+                                                                          else needle)):
                 continue
             t = message.log_time / _NS_PER_S
             where = f"{self.path}: {channel.topic} message {message.sequence} (log time {t:.3f} s)"

@@ -11,8 +11,12 @@ its log and, when the planning forecast was found, the plan made again from it
 - ``cost.png`` (with a plan only): the predicted cost-to-go of the state at each
   decision (spec section 8; for a physical plan the energy still to spend, Wh, on
   the same scale as the energy spent) against the energy actually spent;
-- ``index.html``: the pictures with the summary text, and a note for each
-  picture that could not be drawn (or was drawn without something).
+- ``index.html``: a header (mission, table, UTC start and end, the decision
+  audit's verdict, links to the exports written with it), the autopilot's
+  failsafes and status texts, an interactive map (``planner.shore.replay.webmap``:
+  inline SVG, nothing fetched, so it works offline), the summary text, the
+  pictures, and a note for each picture that could not be drawn (or was drawn
+  without something).
 
 The pictures are drawn by ``planner.shore.plots.dive_track`` (the map, and the
 track's runs and segments, re-exported here) and ``planner.shore.plots.dive_series``.
@@ -22,8 +26,11 @@ Every file is written atomically (``planner.contract.atomic``).
 from __future__ import annotations
 
 import html
+import math
 import os
-from collections.abc import Mapping
+import urllib.parse
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -36,6 +43,9 @@ from planner.shore.plots.dive_series import plot_timeseries as _plot_timeseries
 from planner.shore.plots.dive_track import NEED_FORECAST as _NEED_FORECAST
 from planner.shore.plots.dive_track import ActionRun, TrackSegment, action_runs, track_segments
 from planner.shore.plots.dive_track import plot_dive_track as _plot_track
+from planner.shore.replay.autopilot import severity_name
+from planner.shore.replay.summary import executive_failsafes, failsafe_lines
+from planner.shore.replay.webmap import map_section
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from planner.shore.replay.dive import Dive, Track
@@ -61,6 +71,8 @@ def write_report(
     tables: Mapping[str, PolicyTable],
     plan: PlanResult | None,
     summary_text: str,
+    audit_text: str | None = None,
+    exports: Sequence[str | os.PathLike[str]] = (),
 ) -> Path:
     """Write the dive's pictures and ``index.html`` into ``out_dir`` (created if needed); returns the page's path.
 
@@ -71,7 +83,10 @@ def write_report(
     forecast is not at hand; without it the track has no currents or nominal
     path and ``cost.png`` is not drawn, and the page says so. The prediction
     covers the decisions made under that table (one with the plan's actions).
-    ``summary_text`` is shown as it is, escaped, in a ``<pre>`` block.
+    ``summary_text`` is shown as it is, escaped, in a ``<pre>`` block; ``audit_text``
+    (``planner.shore.replay.audit.summary_line``, None when the audit did not run) heads
+    the page with the mission and the UTC times, and ``exports`` (CSV, GeoJSON, GPX
+    written beside it) are linked by their paths relative to ``out_dir``.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -108,12 +123,73 @@ def write_report(
         else:
             drawn.append((COST_PNG, _plot_cost(dive, cost, plan, bool(plan_rows.all()), out / COST_PNG)))
 
+    figure, map_notes = map_section(dive, table=first, goals=[] if first is None else _goal_tables(dive, tables, first),
+                                    plan=plan)
+    notes += [("map", text) for text in map_notes]
     index = out / INDEX_HTML
-    write_atomic(index, _page(dive, summary_text, drawn, notes).encode("utf-8"))
+    head = _header(dive, audit_text, [Path(p) for p in exports], out)
+    write_atomic(index, _page(dive, summary_text, drawn, notes, head=head, figure=figure).encode("utf-8"))
     return index
 
 
-def _page(dive: Dive, summary_text: str, drawn: list[tuple[str, str]], notes: list[tuple[str, str]]) -> str:
+def _utc(dive: Dive, time_s: float) -> str:
+    unix = dive.utc_s(time_s)
+    if not isinstance(unix, float) or not math.isfinite(unix):  # utc_s of a float: a float, or None without UTC
+        return "unknown (the autopilot sent no SYSTEM_TIME)"
+    return datetime.fromtimestamp(round(unix), UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def _header(dive: Dive, audit_text: str | None, exports: list[Path], out: Path) -> str:
+    """The table heading the page: mission, table, UTC start and end, audit verdict, exports, failsafes."""
+    e = html.escape
+    meta = dive.log.metadata.get("executive", {})
+    rows = [("Mission", e(meta.get("mission") or "none named (the executive ran a table alone)"))]
+    if meta.get("table"):
+        rows.append(("Table", f"{e(meta['table'])} ({e(meta.get('table_crc32', '?'))})"))
+    track = dive.track
+    if len(track):
+        start, end = float(track.time_s[0]), float(np.nanmax(track.time_s))
+        rows.append(("Start", f"{_utc(dive, start)} ({start:.1f} s vehicle time)"))
+        rows.append(("End", f"{_utc(dive, end)} ({end:.1f} s vehicle time, {(end - start) / 3600:.2f} h later)"))
+    if audit_text is None:
+        rows.append(("Audit", "not run (--no-audit)"))
+    else:
+        verdict = audit_text.removeprefix("audit").strip()
+        ok = verdict.endswith("no difference")
+        rows.append(("Audit", f'<span class="{"ok" if ok else "bad"}">{e(verdict)}</span>'))
+    links = [f'<a href="{e(urllib.parse.quote(Path(os.path.relpath(p, out)).as_posix()))}">{e(p.name)}</a>'
+             for p in exports]
+    rows.append(("Exports", ", ".join(links) if links else "none written (--csv, --geojson, --gpx)"))
+    rows.append(("Log", f"<code>{e(str(dive.log.path))}</code>: {e(dive.log.where_it_ends())}"))
+    body = "\n".join(f"<tr><th>{k}</th><td>{v}</td></tr>" for k, v in rows)
+    return f'<table class="head">\n{body}\n</table>\n' + _autopilot(dive)
+
+
+def _autopilot(dive: Dive) -> str:
+    """The failsafes (the autopilot's and the executive's) and the autopilot's status texts by severity."""
+    e = html.escape
+    a = dive.autopilot
+    lines = failsafe_lines(a, executive_failsafes(dive.track.situation, dive.track.time_s))
+    parts = ["<h2>Failsafes and autopilot messages</h2>", f"<pre>{e(chr(10).join(lines))}</pre>"]
+    if a.texts:
+        counts = ", ".join(f"{name} {n:,}" for name, n in a.by_severity().items())
+        parts.append(f"<p>{len(a.texts):,} status texts from the autopilot (STATUSTEXT): {e(counts)}</p>")
+        distinct: dict[tuple[int, str], list[float]] = {}
+        for t in a.texts:
+            distinct.setdefault((t.severity, t.text), []).append(t.time_s)
+        parts.append('<table class="texts"><tr><th>severity</th><th>count</th><th>first (s)</th><th>last (s)</th>'
+                     "<th>text</th></tr>")
+        for (severity, text), times in sorted(distinct.items(), key=lambda kv: (kv[0][0], -len(kv[1]))):
+            parts.append(f'<tr class="sev{severity}"><td>{severity_name(severity)}</td><td>{len(times):,}</td>'
+                         f"<td>{times[0]:.1f}</td><td>{times[-1]:.1f}</td><td>{e(text)}</td></tr>")
+        parts.append("</table>")
+    else:
+        parts.append("<p>No status text from the autopilot in the log.</p>")
+    return "\n".join(parts)
+
+
+def _page(dive: Dive, summary_text: str, drawn: list[tuple[str, str]], notes: list[tuple[str, str]], *,
+          head: str = "", figure: str = "") -> str:
     e = html.escape
     name = dive.log.path.name
     parts = [
@@ -129,11 +205,23 @@ def _page(dive: Dive, summary_text: str, drawn: list[tuple[str, str]], notes: li
         "img { max-width: 100%; height: auto; border: 1px solid #ddd; }",
         "figcaption { color: #555; margin-top: 0.3em; }",
         ".notes li { color: #8a4b00; }",
+        "table { border-collapse: collapse; } th, td { text-align: left; padding: 0.15em 0.8em 0.15em 0; }",
+        "table.texts td, table.texts th { border-bottom: 1px solid #eee; }",
+        ".ok { color: #1a7f37; font-weight: bold; } .bad, .sev0, .sev1, .sev2 { color: #b00020; font-weight: bold; }",
+        ".sev3, .sev4 { color: #8a4b00; }",
+        "figure.map svg { width: 100%; height: auto; border: 1px solid #bbb; touch-action: none; cursor: grab; }",
+        ".map-tools { margin-bottom: 0.3em; color: #555; } .map-tools button { min-width: 2.2em; }",
+        "ul.legend { list-style: none; padding: 0; display: flex; flex-wrap: wrap; gap: 0.3em 1.2em; }",
+        ".swatch { display: inline-block; width: 1.6em; height: 0.8em; margin-right: 0.4em; vertical-align: middle; }",
         "</style>",
         "</head>",
         "<body>",
         f"<h1>Dive report: {e(name)}</h1>",
-        f"<p>Log: <code>{e(str(dive.log.path))}</code></p>",
+        head,
+    ]
+    if figure:
+        parts += ["<h2>Map</h2>", figure]
+    parts += [
         "<h2>Summary</h2>",
         f"<pre>{e(summary_text)}</pre>",
     ]

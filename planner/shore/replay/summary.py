@@ -4,6 +4,9 @@ Pure: ``summarise`` takes a ``Dive`` (and, when the planning forecast was found,
 the nominal path of each plan segment) and returns a ``DiveSummary``;
 ``format_summary`` turns it into the text. Energy is the autopilot's
 BATTERY_STATUS figure, attributed to the action in force between two decisions.
+Distance is along the track filtered of position noise (``track_filter``);
+failsafes are the executive's and the autopilot's (``autopilot``: its STATUSTEXT
+and HEARTBEAT states).
 """
 
 from __future__ import annotations
@@ -17,10 +20,12 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.shore.replay.autopilot import AutopilotLog, severity_name
 from planner.shore.replay.dive import Dive, Segment
 from planner.contract.geodesy import EARTH_RADIUS_M
 
-__all__ = ["DiveSummary", "Deviation", "format_summary", "slices_text", "summarise"]
+__all__ = ["DiveSummary", "Deviation", "executive_failsafes", "failsafe_lines", "format_summary", "slices_text",
+           "status_text_lines", "summarise"]
 
 _NORMAL = ("following", "at_goal")  # situations that are not a failsafe
 
@@ -61,7 +66,9 @@ class DiveSummary:
     where_it_ends: str
     vehicle_s: float  # first to last decision
     wall_s: float
-    distance_m: float
+    distance_m: float  # along the filtered track
+    fix_distance_m: float  # summing every fix, noise and all
+    filter_window_s: float
     decisions: int
     action_starts: Mapping[str, int]  # decisions that started a new activity, by action
     decisions_by_action: Mapping[str, int]
@@ -77,6 +84,7 @@ class DiveSummary:
     deviation_note: str | None  # why there is none
     ignored_channels: Mapping[str, int]
     loaded_time_varying: tuple[Mapping[str, Any], ...] = ()  # loaded policy records of time-varying tables
+    autopilot: AutopilotLog = AutopilotLog()
 
 
 def summarise(dive: Dive, *, nominal: Mapping[int, Polyline] | None = None, nominal_note: str | None = None
@@ -101,25 +109,29 @@ def summarise(dive: Dive, *, nominal: Mapping[int, Polyline] | None = None, nomi
     following = np.flatnonzero(np.asarray(tr.situation) == "following") if n else np.array([], int)
     t_follow = float(tr.time_s[following[0]]) if following.size else (float(tr.time_s[0]) if n else 0.0)
     deviation, note = _deviation(tr, nominal or {}, nominal_note)
+    filtered = tr.filtered()
     return DiveSummary(
         log=str(dive.log.path), where_it_ends=dive.log.where_it_ends(),
         vehicle_s=float(latest[-1] - tr.time_s[0]) if n else 0.0,
         wall_s=float(tr.wall_s[-1] - tr.wall_s[0]) if n else 0.0,
-        distance_m=tr.distance_m(), decisions=n, action_starts=dict(starts),
+        distance_m=filtered.length_m(), fix_distance_m=tr.fix_distance_m(), filter_window_s=filtered.window_s,
+        decisions=n, action_starts=dict(starts),
         decisions_by_action=dict(Counter(labels)), time_by_action_s=time_by, energy_by_action_wh=energy_by,
         energy_used_wh=float(energy[-1] - energy[0]) if energy.size else None,
         plans=tuple(p for p in dive.policy if p.get("reason") in ("swapped", "refused")),
-        failsafes=_failsafes(tr.situation, tr.time_s),
+        failsafes=executive_failsafes(tr.situation, tr.time_s),
         errors=tuple(f"{e.time_s:.1f} s {e.text}" for e in dive.events if e.level == "error"),
         goals_loaded=tuple(sorted({int(p.get("goal_index", 0)) for p in dive.policy if p.get("reason") == "loaded"})),
         goals_reached=_goals(tr.situation, tr.goal_index, tr.time_s, t_follow),
         deviation=deviation, deviation_note=note, ignored_channels=dict(dive.log.unknown),
         loaded_time_varying=tuple(p for p in dive.policy
                                   if p.get("reason") == "loaded" and isinstance(p.get("slices"), dict)),
+        autopilot=dive.autopilot,
     )
 
 
-def _failsafes(situation: Sequence[str], time_s: NDArray[np.float64]) -> tuple[Failsafe, ...]:
+def executive_failsafes(situation: Sequence[str], time_s: NDArray[np.float64]) -> tuple[Failsafe, ...]:
+    """Stretches of decisions in a situation other than following the plan or at the goal."""
     out: list[Failsafe] = []
     current: tuple[str, float, float] | None = None
     for s, t in zip(situation, time_s):
@@ -185,6 +197,44 @@ def distance_to_polyline_m(lat_deg: NDArray[np.float64], lon_deg: NDArray[np.flo
     return out
 
 
+def failsafe_lines(autopilot: AutopilotLog, executive: Sequence[Failsafe]) -> list[str]:
+    """The failsafes: the autopilot's (announced in STATUSTEXT, its HEARTBEAT state) and the executive's stretches."""
+    announced = autopilot.failsafes()
+    n = autopilot.failsafe_count()
+    if n == 0 and not executive and not autopilot.periods:
+        return ["failsafes  0 (none from the autopilot or the executive)"]
+    lines = [f"failsafes  {n} from the autopilot, {len(executive)} by the executive"]
+    cleared = autopilot.cleared()
+    for kind, texts in announced.items():
+        again = f"; {cleared[kind]} text(s) said it cleared" if cleared.get(kind) else ""
+        lines.append(f"  autopilot  {kind.value}: {len(texts)} time(s), first at {texts[0].time_s:.1f} s,"
+                     f" last at {texts[-1].time_s:.1f} s{again}")
+    for state in dict.fromkeys(p.state for p in autopilot.periods):
+        periods = [p for p in autopilot.periods if p.state == state]
+        longest = max(periods, key=lambda p: p.end_s - p.start_s)
+        open_end = ", the log ends in it" if not periods[-1].ended else ""
+        lines.append(f"  autopilot  HEARTBEAT state {state}: {len(periods)} time(s),"
+                     f" {sum(p.end_s - p.start_s for p in periods):.0f} s in all, the longest"
+                     f" {longest.end_s - longest.start_s:.0f} s from {longest.start_s:.1f} s{open_end}")
+    for f in executive:
+        lines.append(f"  {f.start_s:10.1f} s  {f.situation} for {f.end_s - f.start_s:.0f} s")
+    return lines
+
+
+def status_text_lines(autopilot: AutopilotLog, *, most: int = 8) -> list[str]:
+    """The autopilot's STATUSTEXT counted by severity, and its most frequent texts."""
+    if not autopilot.texts:
+        return ["autopilot  no status text"]
+    counts = ", ".join(f"{name} {n:,}" for name, n in autopilot.by_severity().items())
+    lines = [f"autopilot  {len(autopilot.texts):,} status text(s): {counts}"]
+    distinct = Counter((t.severity, t.text) for t in autopilot.texts)
+    for (severity, text), n in sorted(distinct.items(), key=lambda kv: (-kv[1], kv[0][0]))[:most]:
+        lines.append(f"  {n:6,}  {severity_name(severity):<9} {text}")
+    if len(distinct) > most:
+        lines.append(f"  ... and {len(distinct) - most} other text(s)")
+    return lines
+
+
 def slices_text(slices: Mapping[str, Any]) -> str:
     """A time-varying table's slices as a policy record gives them (``executive.timeline.slices_record``)."""
     return f"time-varying, {slices.get('count')} slices from {slices.get('first_utc')} to {slices.get('last_utc')}"
@@ -201,7 +251,8 @@ def format_summary(s: DiveSummary) -> str:
         lines.append("ignored    channels this version does not read: "
                      + ", ".join(f"{k} ({v:,} messages)" for k, v in s.ignored_channels.items()))
     lines.append(f"duration   {_h(s.vehicle_s)} vehicle time, {s.wall_s:.1f} s wall")
-    lines.append(f"distance   {s.distance_m / 1000:.2f} km over ground")
+    lines.append(f"distance   {s.distance_m / 1000:.2f} km over ground (the median fix of every {s.filter_window_s:g} s;"
+                 f" {s.fix_distance_m / 1000:.2f} km summing every fix)")
     energy = "unknown" if s.energy_used_wh is None else f"{s.energy_used_wh:.1f} Wh"
     lines.append(f"energy     {energy}")
     lines.append(f"decisions  {s.decisions:,}")
@@ -226,11 +277,10 @@ def format_summary(s: DiveSummary) -> str:
                      + slices)
     for p in refused:
         lines.append(f"  {p.get('time_s', 0.0):10.1f} s  refused {p.get('refusal')}")
-    lines.append(f"failsafes  {len(s.failsafes)}" + ("" if s.failsafes else " (none)"))
-    for f in s.failsafes:
-        lines.append(f"  {f.start_s:10.1f} s  {f.situation} for {f.end_s - f.start_s:.0f} s")
+    lines += failsafe_lines(s.autopilot, s.failsafes)
     for error in s.errors:
         lines.append(f"  error  {error}")
+    lines += status_text_lines(s.autopilot)
     for reached in s.goals_reached:
         lines.append(f"goal {reached.goal_index:<5} reached at {reached.time_s:.1f} s vehicle time"
                      f" ({_h(reached.after_s)} after the start)")

@@ -8,6 +8,7 @@ the demo goal to the goal.
 from __future__ import annotations
 
 import html
+import json
 import re
 import struct
 from pathlib import Path
@@ -19,6 +20,8 @@ from planner.shore.replay.audit import logged_tables
 from planner.shore.replay.dive import Track, load_dive
 from planner.shore.replay.divelog import open_dive
 from planner.shore.replay.report import ActionRun, action_runs, track_segments, write_report
+from planner.contract.actions import Action
+from planner.shore.plots.style import ACTION_COLORS
 
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -71,7 +74,8 @@ def test_report_without_the_plan_notes_what_is_missing(dive, tmp_path):
     notes = page[page.index("<h2>Notes</h2>"):page.index("<h2>Pictures</h2>")]
     assert "cost.png</code>: not drawn: the predicted cost-to-go needs the planning forecast" in notes
     assert "track.png</code>: drawn without currents and the nominal path" in notes
-    assert notes.count("pass --forecast") == 2
+    assert "map</code>: the map has no currents: they need the planning forecast" in notes
+    assert notes.count("pass --forecast") == 3
     assert f"<pre>{html.escape(SUMMARY)}</pre>" in page
 
 
@@ -90,6 +94,59 @@ def test_report_with_a_plan_of_a_table_the_dive_never_used(dive, demo_plan, tmp_
     page = _check_pictures(index, {"track.png", "timeseries.png"})
     assert f"cost.png</code>: not drawn: no decision under the planned table ({demo_plan.table.crc32:08x})" in page
     assert "track.png</code>: drawn without the nominal path" in page
+
+
+def test_report_header_names_the_mission_the_utc_times_the_verdict_and_links_the_exports(dive, demo_plan, tmp_path):
+    from planner.shore.replay.export import write_csv, write_geojson
+
+    exports = [write_csv(dive, tmp_path / "out" / "dive.csv"), write_geojson(dive, tmp_path / "out" / "dive.geojson")]
+    verdict = "audit      12 decisions run again with 1 logged table(s), 0 swap(s): no difference"
+    index = write_report(dive, tmp_path / "report", tables=logged_tables(dive.log), plan=demo_plan,
+                         summary_text=SUMMARY, audit_text=verdict, exports=exports)
+    page = index.read_text(encoding="utf-8")
+    head = page[page.index('<table class="head">'):page.index("</table>")]
+    mission = dive.log.metadata["executive"]["mission"]
+    assert f"<tr><th>Mission</th><td>{html.escape(mission)}</td></tr>" in head
+    start = np.datetime64(round(dive.utc_s(float(dive.track.time_s[0]))), "s")
+    end = np.datetime64(round(dive.utc_s(float(np.max(dive.track.time_s)))), "s")
+    assert f"<tr><th>Start</th><td>{str(start).replace('T', ' ')} UTC" in head
+    assert f"<tr><th>End</th><td>{str(end).replace('T', ' ')} UTC" in head
+    assert '<span class="ok">12 decisions run again with 1 logged table(s), 0 swap(s): no difference</span>' in head
+    links = re.findall(r'<a href="([^"]+)">', head)
+    assert links == ["../out/dive.csv", "../out/dive.geojson"]
+    assert all((index.parent / link).resolve() == e.resolve() for link, e in zip(links, exports))
+    # The executive's and the autopilot's failsafes have their own section, before the map.
+    assert page.index("Failsafes and autopilot messages") < page.index('<svg id="dive-map"')
+    assert "failsafes  0 (none from the autopilot or the executive)" in page
+    without = write_report(dive, tmp_path / "plain", tables=logged_tables(dive.log), plan=None, summary_text="")
+    head = without.read_text(encoding="utf-8").split("</table>")[0]
+    assert "<tr><th>Audit</th><td>not run (--no-audit)</td></tr>" in head and "none written" in head
+
+
+def test_report_map_is_interactive_self_contained_and_draws_track_goal_geofence_currents(dive, demo_plan, tmp_path):
+    index = write_report(dive, tmp_path, tables=logged_tables(dive.log), plan=demo_plan, summary_text=SUMMARY)
+    page = index.read_text(encoding="utf-8")
+    # Offline: nothing is fetched. No URL at all, no external script, style sheet, font or frame.
+    assert not re.search(r"https?:|//[a-z]", page, flags=re.IGNORECASE)
+    assert not re.search(r"<(script|link|iframe|object|embed)[^>]*\b(src|href)=", page, flags=re.IGNORECASE)
+    assert not re.search(r"@import|url\(|fetch\(|XMLHttpRequest", page)
+    assert set(re.findall(r'\bsrc="([^"]+)"', page)) == {"track.png", "timeseries.png", "cost.png"}
+    svg = page[page.index('<svg id="dive-map"'):page.index("</svg>")]
+    for layer in ("map-land", "map-currents", "map-geofence", "map-goal", "map-track", "map-ends"):
+        assert f'id="{layer}"' in svg, layer
+    # The track: a polyline per run of one action, coloured by it, the rows' order kept.
+    runs = re.findall(r'<polyline class="track" data-action="([^"]*)" points="([^"]+)" stroke="(#[0-9a-f]{6})"', svg)
+    assert [a for a, _, _ in runs] == [s.action or "" for s in track_segments(dive.track)]
+    assert {c for a, _, c in runs if a == "FORWARD"} == {ACTION_COLORS[Action.FORWARD]}
+    # The goal marker sits on the goal of the table, in the map's metres; the fence is the helm's.
+    fence = json.loads(dive.log.metadata["helm"]["config"])["geofence"]
+    assert len(re.search(r'id="map-geofence" points="([^"]+)"', svg).group(1).split()) == len(fence)
+    assert len(re.findall(r"<path d=", svg)) > 20  # current arrows
+    assert "forecast of " + demo_plan.table.forecast_time in page
+    # Pan and zoom: a script that moves the viewBox on wheel and drag, and buttons.
+    script = page[page.index("<script>"):page.index("</script>")]
+    assert "viewBox" in script and '"wheel"' in script and '"pointermove"' in script
+    assert page.count('<button type="button" data-zoom=') == 3
 
 
 # --------------------------------------------------------------------------- segmentation by hand
