@@ -32,7 +32,9 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
                         " identity beside the log and where the table says)")
     p.add_argument("--report", type=Path, metavar="DIR", help="write PNG pictures and index.html here")
     p.add_argument("--csv", type=Path, help="write the state and action time series as CSV")
-    p.add_argument("--geojson", type=Path, help="write the track as GeoJSON (RFC 7946)")
+    p.add_argument("--geojson", type=Path, help="write the track as GeoJSON (RFC 7946), filtered and simplified")
+    p.add_argument("--simplify-m", type=float, default=2.0, metavar="M",
+                   help="the GeoJSON track keeps every filtered position within M metres of its line (default 2)")
     p.add_argument("--gpx", type=Path, help="write the track as GPX 1.1")
     p.add_argument("--no-audit", action="store_true", help="skip running the decisions again")
     p.add_argument("--mavlink", metavar="ADDRESS",
@@ -67,6 +69,8 @@ def _replay(args: argparse.Namespace) -> int:
 
     if args.mavlink is not None and not (math.isfinite(args.speed) and args.speed > 0):
         raise LrauvError(f"--speed: expected a positive factor; got {args.speed}")
+    if not (math.isfinite(args.simplify_m) and args.simplify_m >= 0):
+        raise LrauvError(f"--simplify-m: expected metres >= 0; got {args.simplify_m}")
     t0 = time.perf_counter()
     log = open_dive(args.log)
     dive = load_dive(log)
@@ -79,12 +83,14 @@ def _replay(args: argparse.Namespace) -> int:
     text = format_summary(summary)
     print(text, flush=True)
     status = 0
+    verdict = None
     if not args.no_audit:
         try:
             result = audit(log)
         except LogError as exc:  # some of the audit's say what is wrong, not in which file
             raise exc if str(log.path) in str(exc) else LogError(f"{log.path}: {exc}") from None
-        print(summary_line(result))
+        verdict = summary_line(result)
+        print(verdict)
         for m in result.mismatches[:_MAX_LISTED]:
             print(f"  {m.describe()}")
         if len(result.mismatches) > _MAX_LISTED:
@@ -95,7 +101,8 @@ def _replay(args: argparse.Namespace) -> int:
         from planner.shore.replay.report import write_report
 
         first = next(iter(plans.values()), None)
-        written.append(write_report(dive, args.report, tables=tables, plan=first, summary_text=text))
+        written.append(write_report(dive, args.report, tables=tables, plan=first, summary_text=text,
+                                    audit_text=verdict, exports=list(written)))
     for path in written:
         print(f"wrote      {path}")
     print(f"replay     {time.perf_counter() - t0:.1f} s", flush=True)
@@ -145,7 +152,7 @@ def _exports(args: argparse.Namespace, dive: Any) -> list[Path]:
     out = []
     for path, write in ((args.csv, write_csv), (args.geojson, write_geojson), (args.gpx, write_gpx)):
         if path is not None:
-            out.append(write(dive, path))
+            out.append(write(dive, path, tolerance_m=args.simplify_m) if write is write_geojson else write(dive, path))
     return out
 
 

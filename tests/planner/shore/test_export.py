@@ -22,6 +22,7 @@ import pytest
 from planner.shore.replay.dive import Dive, load_dive
 from planner.shore.replay.divelog import LogMessage, open_dive
 from planner.shore.replay.export import CSV_COLUMNS, GPX_NAMESPACE, write_csv, write_geojson, write_gpx
+from planner.shore.replay.summary import distance_to_polyline_m
 from executive.recorder import LogError, Recorder, Topic
 from planner.contract.geodesy import EARTH_RADIUS_M
 
@@ -112,24 +113,41 @@ def test_geojson_is_a_feature_collection_of_lon_lat_minus_depth(real_dive, tmp_p
     assert doc["type"] == "FeatureCollection"
     track, *points = doc["features"]
     assert track["type"] == "Feature" and track["geometry"]["type"] == "LineString"
-    rows = _expected_points(real_dive)
-    assert track["geometry"]["coordinates"] == [[t.lon_deg[r], t.lat_deg[r], -t.depth_m[r]] for r in rows]
-    assert all(-90 <= lat <= 90 and -180 <= lon <= 180 for lon, lat, _ in track["geometry"]["coordinates"])
+    coords = track["geometry"]["coordinates"]
+    assert all(-90 <= lat <= 90 and -180 <= lon <= 180 for lon, lat, _ in coords)
     props = track["properties"]
-    assert props["name"] == real_dive.log.path.name and props["decisions"] == len(t) and props["points"] == len(rows)
-    assert "-depth_m" in props["altitude"]
+    assert props["name"] == real_dive.log.path.name and props["decisions"] == len(t)
+    assert props["points"] == len(coords) and props["fixes"] == len(_expected_points(real_dive))
+    assert "-depth_m" in props["altitude"] and "median fix of every 30 s" in props["filter"]
     assert props["start_time_s"] == t.time_s[0] and props["end_time_s"] == t.time_s[-1]
     assert props["start_utc"].endswith("Z") and props["end_utc"] > props["start_utc"]
     assert props["distance_m"] == pytest.approx(real_dive.track.distance_m())
     kinds = [p["properties"]["kind"] for p in points]
     assert kinds[:2] == ["start", "end"]
-    assert points[0]["geometry"]["coordinates"] == track["geometry"]["coordinates"][0]
-    assert points[1]["geometry"]["coordinates"] == track["geometry"]["coordinates"][-1]
+    assert points[0]["geometry"]["coordinates"] == coords[0]
+    assert points[1]["geometry"]["coordinates"] == coords[-1]
     # The dive reached its one goal: one goal point, at the first at_goal decision.
     goals = [p for p in points if p["properties"]["kind"] == "goal"]
     first = t.situation.index("at_goal")
     assert len(goals) == 1 and goals[0]["properties"]["time_s"] == t.time_s[first]
     assert goals[0]["geometry"]["coordinates"] == [t.lon_deg[first], t.lat_deg[first], -t.depth_m[first]]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tolerance_m", [0.5, 2.0, 20.0])
+def test_geojson_track_is_the_filtered_track_simplified_to_the_tolerance(real_dive, tmp_path, tolerance_m):
+    """Far fewer vertices than fixes, and every filtered position within the tolerance of the line."""
+    doc = json.loads(write_geojson(real_dive, tmp_path / "dive.geojson", tolerance_m=tolerance_m).read_text())
+    track = doc["features"][0]
+    coords = np.array(track["geometry"]["coordinates"])
+    f = real_dive.track.filtered()
+    assert track["properties"]["simplified_m"] == tolerance_m
+    assert 2 <= len(coords) <= len(f) and len(coords) < len(_expected_points(real_dive)) / 20
+    d = distance_to_polyline_m(f.lat_deg, f.lon_deg, coords[:, 1], coords[:, 0])
+    assert float(d.max()) <= tolerance_m + 1e-6
+    # Depth, the third coordinate, is simplified within the tolerance too: each vertex is a filtered point's.
+    kept = {(round(x, 9), round(y, 9), round(z, 6)) for x, y, z in zip(f.lon_deg, f.lat_deg, -f.depth_m)}
+    assert all((round(x, 9), round(y, 9), round(z, 6)) in kept for x, y, z in coords)
 
 
 @pytest.mark.slow
@@ -199,9 +217,10 @@ def small_dive(tmp_path) -> Dive:
 def test_unknown_positions_and_repeats_are_left_out_and_goals_marked(small_dive, tmp_path):
     doc = json.loads(write_geojson(small_dive, tmp_path / "s.geojson").read_text())
     track, *points = doc["features"]
-    assert track["geometry"]["coordinates"] == [[-117.90, 33.40, 0.0], [-117.90, 33.41, -5.0],
-                                                [-117.90, 33.42, -5.0], [-117.90, 33.43, -2.5]]
-    # Three steps of 0.01 deg due north: three arcs of R * 0.01 deg on a meridian.
+    # All in one 30 s window: the first fix, the window's median, the last fix, none within 2 m of a line.
+    assert track["geometry"]["coordinates"] == [[-117.90, 33.40, 0.0], [-117.90, 33.415, -3.75],
+                                                [-117.90, 33.43, -2.5]]
+    # 0.03 deg due north in all: three arcs of R * 0.01 deg on a meridian.
     assert track["properties"]["distance_m"] == pytest.approx(3 * EARTH_RADIUS_M * math.radians(0.01), rel=1e-9)
     goals = [(p["properties"]["goal_index"], p["properties"]["time_s"]) for p in points
              if p["properties"]["kind"] == "goal"]
@@ -235,3 +254,21 @@ def test_an_unwritable_path_raises_log_error_naming_it(small_dive, tmp_path, wri
     with pytest.raises(LogError, match=str(target)):
         write(small_dive, target)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file", "small.mcap"]
+
+
+@pytest.mark.slow
+def test_replay_simplifies_the_geojson_to_the_tolerance_it_is_given(dive_log, tmp_path, capsys):
+    from planner.cli import main as lrauv
+
+    counts = {}
+    for tolerance in ("0", "25"):
+        out = tmp_path / f"t{tolerance}.geojson"
+        assert lrauv(["replay", str(dive_log), "--no-audit", "--geojson", str(out), "--simplify-m", tolerance]) == 0
+        props = json.loads(out.read_text())["features"][0]["properties"]
+        assert props["simplified_m"] == float(tolerance)
+        counts[tolerance] = props["points"]
+    assert counts["25"] < counts["0"]
+    capsys.readouterr()
+    assert lrauv(["replay", str(dive_log), "--geojson", str(tmp_path / "x.geojson"), "--simplify-m", "-1"]) == 2
+    assert "--simplify-m: expected metres >= 0; got -1.0" in capsys.readouterr().err
+    assert not (tmp_path / "x.geojson").exists()
