@@ -39,6 +39,7 @@ from executive.state import (
 from executive.geofence import inside
 from executive.mode_requests import Progress, progress
 from executive.plausibility import Limits
+from executive.setpoints import Ramp, target_at
 from planner.contract.actions import Action
 from planner.contract.settings import BreachAction, OnArrival
 from planner.contract.steering import DEPTH_TOLERANCE_M, Steering, SteeringKind, is_complete, steer
@@ -128,6 +129,7 @@ class Activity:
     target: Command | None  # streamed while this activity lasts
     started_s: float
     steering: Steering | None = None  # the table action's, when following it
+    ramp: Ramp | None = None  # where its yaw and depth setpoints start: set when its target is first sent
 
     @property
     def key(self) -> tuple[object, ...]:
@@ -141,6 +143,10 @@ class Activity:
     @property
     def timeout_s(self) -> float | None:
         return self.steering.timeout_s if self.steering is not None else None
+
+    def target_at(self, now_s: float) -> Command | None:
+        """What to send at ``now_s``: ``target`` with its yaw and depth moved at the plan's rates (executive.setpoints)."""
+        return None if self.target is None else target_at(self.target, self.steering, self.ramp, now_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -636,7 +642,12 @@ def _realise(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: 
         if _mode_due(helm, act.mode, now_s, config):
             helm = _ask_mode(helm, act.mode, now_s, out)
         return helm
-    if act.target is not None and _due(helm.target_sent_s, now_s, config.refresh_s):
-        out.commands.append(act.target)
+    target = act.target
+    if target is not None and _due(helm.target_sent_s, now_s, config.refresh_s):
+        if act.steering is not None and act.ramp is None:  # setpoints move from where the vehicle is when first commanded
+            heading = vehicle.heading_deg if vehicle.heading_deg is not None and math.isfinite(vehicle.heading_deg) else None
+            act = replace(act, ramp=Ramp(now_s, heading, _position(vehicle)[2]))
+            helm = replace(helm, activity=act)
+        out.commands.append(target_at(target, act.steering, act.ramp, now_s))
         helm = replace(helm, target_sent_s=now_s)
     return helm

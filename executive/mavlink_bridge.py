@@ -41,6 +41,9 @@ AUTOPILOT_COMPONENT = mavlink.MAV_COMP_ID_AUTOPILOT1  # 1
 
 # POSITION_TARGET_TYPEMASK (section 2.3, verified masks); 1 = ignore.
 MASK_VELOCITY_YAW = 2503  # vx, vy, vz, yaw
+# vx, vy, vz, yaw and yaw rate: ArduSub's GUIDED slews toward the yaw at min(yaw rate, 60 deg/s)
+# (GCS_MAVLINK_Sub::handle_message -> ModeGuided::guided_set_velocity -> guided_set_yaw_state).
+MASK_VELOCITY_YAW_RATE = 455
 MASK_DEPTH_ONLY = 3579  # z only (ALT_HOLD depth target)
 MASK_POSITION_ONLY = 3576  # x, y, z
 
@@ -368,10 +371,14 @@ def encode(mav: mavlink.MAVLink, cmd: Command, *, time_boot_ms: int, target_syst
     """The MAVLink message for a helm command, addressed to the autopilot."""
     ts, tc = target_system, target_component
     if isinstance(cmd, VelocityYaw):
+        # The yaw rate is a magnitude: ArduSub turns toward the yaw at it, and a negative one would
+        # turn it away (AC_AttitudeControl_Sub::input_euler_angle_roll_pitch_slew_yaw_cd).
+        rate = cmd.yaw_rate_deg_s
         return mav.set_position_target_local_ned_encode(
-            time_boot_ms, ts, tc, mavlink.MAV_FRAME_LOCAL_NED, MASK_VELOCITY_YAW,
+            time_boot_ms, ts, tc, mavlink.MAV_FRAME_LOCAL_NED,
+            MASK_VELOCITY_YAW if rate is None else MASK_VELOCITY_YAW_RATE,
             0.0, 0.0, 0.0, cmd.north_m_s, cmd.east_m_s, cmd.down_m_s, 0.0, 0.0, 0.0,
-            math.radians(_wrap180(cmd.yaw_deg)), 0.0)
+            math.radians(_wrap180(cmd.yaw_deg)), 0.0 if rate is None else math.radians(abs(rate)))
     if isinstance(cmd, DepthTarget):
         return mav.set_position_target_global_int_encode(
             time_boot_ms, ts, tc, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, MASK_DEPTH_ONLY,

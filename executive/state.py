@@ -92,12 +92,17 @@ class SetMessageInterval:
 
 @dataclass(frozen=True, slots=True)
 class VelocityYaw:
-    """Through-water velocity (NED, m/s) and absolute yaw: SET_POSITION_TARGET_LOCAL_NED, mask 2503."""
+    """Through-water velocity (NED, m/s) and absolute yaw: SET_POSITION_TARGET_LOCAL_NED.
+
+    With ``yaw_rate_deg_s`` (a magnitude: ArduSub slews toward the yaw at it) the yaw rate field is
+    sent too (type_mask 455), else only the yaw (2503).
+    """
 
     north_m_s: float
     east_m_s: float
     down_m_s: float
     yaw_deg: float
+    yaw_rate_deg_s: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -24,6 +24,11 @@ How each side realises a kind, and where the two differ:
   the pilot.
 - Held manoeuvres: the helm gives up after ``timeout_s`` and decides again; the pilot holds
   until ``is_complete`` (its runs end on their own time limit).
+- Rates: a steering carries the rates the plan priced (``yaw_rate_deg_s``, ``glide_rate_m_s``).
+  The helm moves its yaw and depth setpoints toward ``yaw_deg`` and ``depth_m`` at them
+  (``executive.setpoints``), so an autopilot with faster slews of its own still turns and glides
+  at the priced rate; the pilot's simulator flies them as its own limits. Completion is judged on
+  the measured heading and depth against the final ``yaw_deg`` and ``goal_depth_m``.
 """
 
 from __future__ import annotations
@@ -62,6 +67,8 @@ class Steering:
     goal_k: int | None = None  # ROTATE: the heading index turned to
     goal_depth_m: float | None = None  # UP/DOWN: the neighbouring layer's depth
     timeout_s: float | None = None  # held manoeuvres: the helm decides again after this long
+    yaw_rate_deg_s: float | None = None  # the plan's turn rate: the helm's yaw setpoint moves toward yaw_deg at it
+    glide_rate_m_s: float | None = None  # the plan's glide rate: the helm's depth setpoint moves toward depth_m at it
     heading_tolerance_deg: float = HEADING_TOLERANCE_DEG
     depth_tolerance_m: float = DEPTH_TOLERANCE_M
 
@@ -86,29 +93,35 @@ def steer(
 ) -> Steering:
     """The steering for a flyable table ``action`` in ``state = (l, j, i, k)``.
 
-    ``yaw_rate_deg_s`` and ``glide_rate_m_s`` size the timeouts of turns and glides: three
-    times the nominal time plus a margin.
+    ``yaw_rate_deg_s`` and ``glide_rate_m_s`` are the rates the plan priced: the steering carries
+    them for the helm's setpoints, and they size the timeouts of turns and glides: three times the
+    nominal time (90 deg, one layer spacing) plus a margin, so a setpoint moved at the priced rate
+    from wherever in its state the vehicle starts (a heading within its bin, a depth within half a
+    spacing of its layer) arrives well inside it.
     """
     l, j, _i, k = state
     if action in FORWARD_ACTIONS:
         # spec section 2: steer along bearing_k(j) of this cell; FORWARD_LEFT/RIGHT (physical plans) a
         # third of the way to the neighbouring heading's bearing (docs/physical-model.md, "Courses")
         return Steering(kind=SteeringKind.VELOCITY, yaw_deg=table.course_deg(j, k, action), speed_m_s=cruise_speed_m_s,
-                        depth_m=table.depth_m[l], depth_tolerance_m=depth_tolerance_m)
+                        depth_m=table.depth_m[l], depth_tolerance_m=depth_tolerance_m,
+                        yaw_rate_deg_s=yaw_rate_deg_s, glide_rate_m_s=glide_rate_m_s)
     if action in (Action.ROTATE_LEFT, Action.ROTATE_RIGHT):
         # spec section 5: a turn to the neighbouring heading, left counter-clockwise (k + 1); its
         # yaw is that heading's bearing in this row (spec section 2)
         goal_k = (k + 1) % 8 if action == Action.ROTATE_LEFT else (k - 1) % 8
         return Steering(kind=SteeringKind.ROTATE, yaw_deg=table.bearing_deg(j, goal_k), held=True, goal_k=goal_k,
-                        timeout_s=3.0 * 90.0 / yaw_rate_deg_s + 10.0, depth_tolerance_m=depth_tolerance_m)
+                        timeout_s=3.0 * 90.0 / yaw_rate_deg_s + 10.0, depth_tolerance_m=depth_tolerance_m,
+                        yaw_rate_deg_s=yaw_rate_deg_s, glide_rate_m_s=glide_rate_m_s)
     if action in (Action.UP, Action.DOWN):
         # spec section 5: a glide to the neighbouring layer, drifting with the current on the way
         goal_depth = table.depth_m[l - 1 if action == Action.UP else l + 1]
         return Steering(kind=SteeringKind.DEPTH, depth_m=goal_depth, held=True, goal_depth_m=goal_depth,
                         timeout_s=3.0 * abs(goal_depth - table.depth_m[l]) / glide_rate_m_s + 30.0,
-                        depth_tolerance_m=depth_tolerance_m)
+                        depth_tolerance_m=depth_tolerance_m, yaw_rate_deg_s=yaw_rate_deg_s, glide_rate_m_s=glide_rate_m_s)
     if action == Action.DRIFT:
-        return Steering(kind=SteeringKind.DEPTH, depth_m=table.depth_m[l], depth_tolerance_m=depth_tolerance_m)
+        return Steering(kind=SteeringKind.DEPTH, depth_m=table.depth_m[l], depth_tolerance_m=depth_tolerance_m,
+                        yaw_rate_deg_s=yaw_rate_deg_s, glide_rate_m_s=glide_rate_m_s)
     # AT_GOAL and UNREACHABLE are table codes, not manoeuvres (spec section 6): callers handle them
     raise ContractError(f"steer: {action.name} is a table code, not an action the vehicle can fly")
 

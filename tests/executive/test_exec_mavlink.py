@@ -71,15 +71,16 @@ def test_setup_then_each_action_becomes_the_documented_message(rig):
     ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.GUIDED)
     ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_COMPONENT_ARM_DISARM and m.param1 == 1)
 
-    # FORWARD: LOCAL_NED velocity + yaw, mask 2503, along the cell's bearing at cruise speed.
+    # FORWARD: LOCAL_NED velocity, yaw and yaw rate (mask 455), along the cell's bearing at cruise speed.
     _go(ap, table, fwd)
     msg = ap.expect("SET_POSITION_TARGET_LOCAL_NED")
     bearing = table.bearing_deg(fwd[1], fwd[3])
-    assert msg.type_mask == 2503 and msg.coordinate_frame == MAV.MAV_FRAME_LOCAL_NED
+    assert msg.type_mask == 455 and msg.coordinate_frame == MAV.MAV_FRAME_LOCAL_NED
+    assert msg.yaw_rate == pytest.approx(math.radians(10.0))  # the mission's yaw_rate_deg_s
     assert (msg.target_system, msg.target_component) == (1, 1)
     assert math.hypot(msg.vx, msg.vy) == pytest.approx(1.0, rel=1e-6) and msg.vz == 0.0
     assert math.degrees(math.atan2(msg.vy, msg.vx)) % 360 == pytest.approx(bearing % 360, abs=1e-3)
-    assert _yaw_deg(msg) == pytest.approx(bearing % 360, abs=1e-3)
+    assert _yaw_deg(msg) == pytest.approx(bearing % 360, abs=0.01)  # from the heading (hdg: centidegrees)
     # Re-sent while the action lasts (ArduSub drops velocity targets after 3 s).
     for _ in range(6):
         _go(ap, table, fwd)
@@ -95,11 +96,12 @@ def test_setup_then_each_action_becomes_the_documented_message(rig):
     assert depth.type_mask == 3579 and depth.alt == pytest.approx(-table.depth_m[drift[0]])
     assert depth.coordinate_frame == MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
-    # DOWN: the neighbouring layer's depth, still in ALT_HOLD.
+    # DOWN: toward the neighbouring layer's depth, still in ALT_HOLD; the target starts at the
+    # vehicle's depth and moves at the glide rate (tests/executive/test_setpoints.py).
     down = _state(table, Action.DOWN)
     _go(ap, table, down)
-    glide = ap.expect("SET_POSITION_TARGET_GLOBAL_INT", where=lambda m: m.alt != depth.alt or down[0] != drift[0])
-    assert glide.type_mask == 3579 and glide.alt == pytest.approx(-table.depth_m[down[0] + 1])
+    glide = ap.expect("SET_POSITION_TARGET_GLOBAL_INT", where=lambda m: m.alt != depth.alt or down[0] == drift[0])
+    assert glide.type_mask == 3579 and glide.alt == pytest.approx(-table.depth_m[down[0]])
 
     # ROTATE_LEFT: GUIDED, zero velocity, yaw to the next direction counter-clockwise (45 deg left).
     rot = _state(table, Action.ROTATE_LEFT)
@@ -107,8 +109,10 @@ def test_setup_then_each_action_becomes_the_documented_message(rig):
     ap.expect("COMMAND_LONG", where=lambda m: m.command == MAV.MAV_CMD_DO_SET_MODE and m.param2 == SubMode.GUIDED)
     _go(ap, table, rot)
     turn = ap.expect("SET_POSITION_TARGET_LOCAL_NED")
-    assert turn.type_mask == 2503 and (turn.vx, turn.vy, turn.vz) == (0.0, 0.0, 0.0)
-    assert _yaw_deg(turn) == pytest.approx(table.bearing_deg(rot[1], (rot[3] + 1) % 8) % 360, abs=1e-3)
+    assert turn.type_mask == 455 and (turn.vx, turn.vy, turn.vz) == (0.0, 0.0, 0.0)
+    # The yaw setpoint starts on the heading and turns at the yaw rate (tests/executive/test_setpoints.py).
+    assert _yaw_deg(turn) == pytest.approx(table.bearing_deg(rot[1], rot[3]) % 360, abs=0.01)
+    assert turn.yaw_rate == pytest.approx(math.radians(10.0))
 
     # Outside the grid: SURFACE (DO_SET_MODE 9), logged.
     ap.heartbeat()

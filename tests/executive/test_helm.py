@@ -91,9 +91,12 @@ def test_course_offset_forward_streams_velocity_a_third_of_the_way_to_the_neighb
     physical = replace(table, actions=actions, model="physical")
     tick = _run(physical, _vehicle_at(physical, state))
     assert tick.decision.action == action and tick.decision.cell == state
-    (cmd,) = tick.commands
-    assert isinstance(cmd, VelocityYaw)
+    (sent,) = tick.commands
+    cmd = tick.helm.activity.target  # the course; the yaw setpoint turns to it at the plan's rate
+    assert isinstance(cmd, VelocityYaw) and isinstance(sent, VelocityYaw)
     bearing, neighbour = table.bearing_deg(j, k), table.bearing_deg(j, (k + dk) % 8)
+    assert sent == replace(cmd, yaw_deg=sent.yaw_deg, yaw_rate_deg_s=CONFIG.yaw_rate_deg_s)
+    assert sent.yaw_deg == pytest.approx(bearing % 360.0)  # from the heading it is on
     turn = (cmd.yaw_deg - bearing + 180.0) % 360.0 - 180.0
     assert turn == pytest.approx(((neighbour - bearing + 180.0) % 360.0 - 180.0) / 3.0)
     assert turn < 0 if action == Action.FORWARD_LEFT else turn > 0  # left: counter-clockwise
@@ -119,7 +122,9 @@ def test_rotate_turns_45_degrees_and_holds_until_on_the_new_bearing(table, actio
     tick = _run(table, _vehicle_at(table, state))
     (cmd,) = tick.commands
     goal = table.bearing_deg(j, (k + dk) % 8)
-    assert cmd == VelocityYaw(0.0, 0.0, 0.0, goal)
+    assert tick.helm.activity.target == VelocityYaw(0.0, 0.0, 0.0, goal)
+    # The yaw setpoint starts on the heading and turns at the plan's rate (executive.setpoints).
+    assert cmd == VelocityYaw(0.0, 0.0, 0.0, table.bearing_deg(j, k) % 360.0, CONFIG.yaw_rate_deg_s)
     # Left is counter-clockwise (k + 1): the compass bearing decreases by about 45 degrees.
     turn = (goal - table.bearing_deg(j, k) + 180.0) % 360.0 - 180.0
     assert turn == pytest.approx(-45.0 * dk, abs=10.0)
@@ -154,11 +159,14 @@ def test_glide_goes_to_the_neighbouring_layer_and_holds_until_there(table, actio
     target = table.depth_m[l + dl]
     alt = _vehicle_at(table, state, mode=int(SubMode.ALT_HOLD))
     tick = _run(table, alt)
-    assert tick.commands == (DepthTarget(target),)
+    assert tick.helm.activity.target == DepthTarget(target)
+    # The depth setpoint starts at the vehicle's depth and moves at the plan's glide rate (executive.setpoints).
+    assert tick.commands == (DepthTarget(table.depth_m[l]),)
     # Half-way the glide continues although the nearest layer may already be the new one.
     mid = (table.depth_m[l] + target) / 2 + 0.1 * dl
     held = _run(table, replace(alt, time_s=110.0, depth_m=mid), helm=tick.helm, now_s=110.0)
     assert held.decision.action == action and not held.decision.changed
+    assert held.commands == (DepthTarget(table.depth_m[l] + dl * 10.0 * CONFIG.glide_rate_m_s),)
     done = _run(table, replace(alt, time_s=130.0, depth_m=target), helm=held.helm, now_s=130.0)
     assert done.decision.changed
 

@@ -113,8 +113,13 @@ def _helm(table: PolicyTable, state: tuple[int, int, int, int]) -> tuple[HelmSta
     assert act is not None and tick.decision is not None and tick.decision.cell == state
     if act.mode is not SubMode.GUIDED:  # once the vehicle is in the activity's mode, the target streams
         tick = step(RUNNING, _vehicle(table, state, mode=act.mode, **at), table, CONFIG, now_s=NOW_S, link_ok=True)
-        assert tick.helm.activity == act
-    assert tick.commands == (act.target,)
+        assert replace(tick.helm.activity, ramp=None) == act
+        act = tick.helm.activity
+    # The setpoint moves toward the target at the plan's rates (executive.setpoints) and ends on it.
+    assert tick.commands == (act.target_at(NOW_S),)
+    final = act.target_at(NOW_S + 1e4)
+    assert final == (replace(act.target, yaw_rate_deg_s=YAW_RATE_DEG_S) if isinstance(act.target, VelocityYaw)
+                     else act.target)
     return tick.helm, act
 
 
