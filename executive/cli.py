@@ -216,6 +216,8 @@ def _exec(args: argparse.Namespace) -> int:
         print(f"energy     {energy}")
         print(f"run        {s.vehicle_time_s / 3600:.2f} h vehicle time in {s.wall_s:.1f} s wall;"
               f" {s.decisions:,} decisions, {s.messages_in:,} messages in ({s.messages_bad} bad), {s.commands_out:,} out")
+        if s.messages_not_logged:
+            print(f"raw log    {s.messages_not_logged:,} unused autopilot messages counted, not logged raw")
         if s.decision_median_us is not None:
             print(f"latency    decision median {s.decision_median_us:.0f} us, p99 {s.decision_p99_us:.0f} us"
                   f" (with MCAP writes p99 {s.message_p99_us:.0f} us)")

@@ -32,6 +32,7 @@ from executive.latency import LatencyHistogram
 from executive.links import LinkGuard
 from executive.mission_protocol import addressed_to
 from executive.plan_changes import PlanChanges
+from executive.raw_log import RawFilter
 from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
 from executive.state_writer import StateWriter
@@ -86,6 +87,7 @@ class RunSummary:
     messages_in: int
     messages_bad: int
     commands_out: int
+    messages_not_logged: int  # the autopilot's unused messages, counted but not in the raw log (executive.raw_log)
     final_phase: str
     reason: str  # why the loop stopped
     log_path: str
@@ -120,6 +122,7 @@ class Executive(PlanChanges):
         self.conn = bridge.open_link(config.link, source_system=bridge.EXECUTIVE_SYSTEM,
                                      source_component=bridge.EXECUTIVE_COMPONENT)
         self.link = LinkGuard(self.conn, config.autopilot_system)  # locked to the autopilot once heard
+        self.raw = RawFilter(name for name, _ in config.helm.rates)  # what the raw MAVLink log keeps
         self.lockstep = False  # the autopilot asked for progress reports (a TIMESYNC request: a lockstep simulator)
         self.progress_reports = 0  # lockstep reports sent (bridge.progress_report)
         self._reported_s = 0.0  # the vehicle time of the last report
@@ -386,7 +389,8 @@ class Executive(PlanChanges):
         if mine and t_boot is not None:
             t_boot = self._stamp(t_boot, wall, note)
             if t_boot is None:
-                self._log(self._record_rx, self.clock.now_s(wall), msg, note)
+                if self.raw.keep(kind):
+                    self._log(self._record_rx, self.clock.now_s(wall), msg, note)
                 return False
         if mine and t_boot is not None and not self.clock.synced and self.vehicle.heartbeat_s is not None:
             # HEARTBEAT carries no time_boot_ms: one heard before the first timestamp was stamped
@@ -409,7 +413,8 @@ class Executive(PlanChanges):
         now_s = self.clock.now_s(wall)
         if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
             return False
-        self._log(self._record_rx, now_s, msg, note)
+        if not mine or self.raw.keep(kind):  # ArduSub's unused default streams are only counted
+            self._log(self._record_rx, now_s, msg, note)
         if not mine:
             if kind in Uploads.MESSAGES or kind == "COMMAND_LONG":  # a ground station routed through the autopilot
                 self._upload_message(msg, self.mav, now_s)
@@ -595,6 +600,9 @@ class Executive(PlanChanges):
         if self._wall_to_heartbeat(wall) <= 0.0:
             self._heartbeat(wall)
         now_s = self.clock.now_s(wall)
+        unlogged = self.raw.report(now_s)
+        if unlogged is not None:
+            self._log(self.recorder.log, now_s, "debug", unlogged)
         hb = self.vehicle.heartbeat_s
         closed = self.link.closed  # the autopilot's side closed the stream: a lost link, no silence to wait out
         if closed and not self._closed_said:
@@ -672,7 +680,7 @@ class Executive(PlanChanges):
             reached=self._arrival_s is not None, arrival_s=self._arrival_s, mission_time_s=mission,
             energy_used_wh=self.vehicle.energy_used_wh, vehicle_time_s=self.vehicle.time_s, wall_s=wall_s,
             decisions=self._counts["decisions"], messages_in=self._counts["in"], messages_bad=self._counts["bad"],
-            commands_out=self._counts["out"], final_phase=self.helm.phase.value,
+            commands_out=self._counts["out"], messages_not_logged=self.raw.skipped_total, final_phase=self.helm.phase.value,
             reason=self._stop_reason or "stopped", log_path=str(self.config.log_path),
             decision_median_us=self.decision_latency.percentile_us(50),
             decision_p99_us=self.decision_latency.percentile_us(99),

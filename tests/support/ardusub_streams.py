@@ -58,3 +58,4 @@ def frames(mav: mavlink.MAVLink, start_ms: int, seconds: float, step_ms: int = 1
         for name, period in periods.items():
             if t % period < step_ms:
                 yield t, message(name, t).pack(mav)  # type: ignore[attr-defined]
+                mav.seq = (mav.seq + 1) % 256  # as MAVLink.send does: a frame never repeats the one before
