@@ -5,19 +5,26 @@ No sockets and no pymavlink: ``vehicle_sim.endpoint`` decodes messages into call
 All times are simulated seconds since boot. What ArduSub does was observed on ArduSub SITL
 and read in ArduSub's GCS_MAVLink handlers:
 
-- boots in MANUAL, disarmed; GUIDED is refused ("GUIDED requires position") until the EKF has
-  a position, ``position_delay_s`` (41 s on SITL) after boot;
+- boots in MANUAL, disarmed; arming is accepted at once, in MANUAL, before the EKF is ready;
+- no GPS for ``gps_delay_s`` (about 9 s on SITL): GLOBAL_POSITION_INT then has lat = lon = 0;
+- GUIDED is refused ("Mode change failed: GUIDED requires position") until the EKF has a
+  position (EKF_POS_HORIZ_ABS), ``position_delay_s`` (41 s on SITL) after boot;
 - GUIDED velocity targets are zeroed 3 s after the last update; position targets persist;
-- SET_POSITION_TARGET_GLOBAL_INT's yaw fields are ignored; yaw comes from LOCAL_NED or
-  MAV_CMD_CONDITION_YAW; in ALT_HOLD a GLOBAL_INT target with Z sets the held depth;
-- the GCS heartbeat failsafe (FS_GCS_ENABLE) fires when a tracked peer's HEARTBEAT stops.
+- SET_POSITION_TARGET_GLOBAL_INT's yaw fields are ignored; yaw comes from LOCAL_NED (its yaw
+  rate, when given, is the rate the heading target is approached at) or MAV_CMD_CONDITION_YAW;
+  in ALT_HOLD a GLOBAL_INT target with Z sets the held depth;
+- heading and depth follow their targets at the autopilot's own rates (``Tracking``: about
+  30 deg/s and 1 m/s), not at the mission's figures;
+- SURFACE climbs at that vertical rate and, once at the surface (shallower than SURFACE_DEPTH,
+  10 cm), switches itself to ALT_HOLD (mode reason SURFACE_COMPLETE, no STATUSTEXT);
+- the GCS heartbeat failsafe (FS_GCS_ENABLE) counts only heartbeats from system MAV_GCS_SYSID
+  (SYSID_MYGCS, 255 by default) and never fires before one was seen; the companion computer
+  (1/191) feeds it only on a vehicle whose MAV_GCS_SYSID is set to 1.
 
 Deviations, chosen for an LRAUV and documented where they act: velocities are through the
-water (ArduSub's are over ground, from its EKF); heartbeats of the companion computer
-(component 191) count for the failsafe as well as the GCS's (system 255; real ArduSub tracks
-only SYSID_MYGCS, so on a vehicle set MAV_GCS_SYSID / SYSID_MYGCS to the companion's or use
-FS_GCS_ENABLE accordingly); the default failsafe action is SURFACE (ArduSub's default
-disarms); an empty battery surfaces.
+water (ArduSub's are over ground, from its EKF); the default failsafe action is SURFACE
+(ArduSub's default disarms; ``--failsafe disarm`` or ``--profile ardusub``); an empty battery
+surfaces.
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from enum import Enum, IntEnum, unique
 from typing import TypedDict
 
 from planner.contract.modes import SubMode  # ArduSub's mode numbers, shared with the executive
-from vehicle_sim.dynamics import IDLE, Body, Setpoint, SetpointKind, TurnDirection
+from vehicle_sim.dynamics import ARDUSUB_TRACKING, IDLE, Body, Setpoint, SetpointKind, Tracking, TurnDirection
 from planner.contract.geodesy import M_PER_DEG_LAT
 
 
@@ -79,6 +86,26 @@ class Msg(IntEnum):
     BATTERY_STATUS = 147
     AUTOPILOT_VERSION = 148
     EKF_STATUS_REPORT = 193
+    # ArduSub's other default streams (ardusub-sitl-facts.md); off unless asked for.
+    GPS_RAW_INT = 24
+    RAW_IMU = 27
+    SCALED_PRESSURE = 29
+    LOCAL_POSITION_NED = 32
+    SERVO_OUTPUT_RAW = 36
+    NAV_CONTROLLER_OUTPUT = 62
+    RC_CHANNELS = 65
+    SCALED_IMU2 = 116
+    SCALED_IMU3 = 129
+    DISTANCE_SENSOR = 132
+    TERRAIN_REPORT = 136
+    SCALED_PRESSURE2 = 137
+    SCALED_PRESSURE3 = 143
+    AHRS = 163
+    SIMSTATE = 164
+    RANGEFINDER = 173
+    AHRS2 = 178
+    VIBRATION = 241
+    NAMED_VALUE_FLOAT = 251
 
 
 class Cmd(IntEnum):
@@ -100,7 +127,18 @@ DEFAULT_INTERVALS_S: dict[int, float] = {
     Msg.BATTERY_STATUS: 1 / 3,
     Msg.SYS_STATUS: 0.5,
 }
-REQUESTABLE = frozenset(DEFAULT_INTERVALS_S) | {Msg.AUTOPILOT_VERSION}
+# ArduSub's other default streams, as observed on SITL (the facts file's rate table); NAMED_VALUE_FLOAT
+# is ArduSub's nine named values (CamTilt, Lights1, PilotGain, ...) at 2 Hz each: 18 messages a second.
+ARDUSUB_EXTRA_INTERVALS_S: dict[int, float] = {
+    Msg.AHRS2: 0.1, Msg.SIMSTATE: 0.1,
+    Msg.AHRS: 1 / 3, Msg.DISTANCE_SENSOR: 1 / 3, Msg.RANGEFINDER: 1 / 3, Msg.VIBRATION: 1 / 3,
+    Msg.TERRAIN_REPORT: 1 / 3,
+    Msg.GPS_RAW_INT: 0.5, Msg.LOCAL_POSITION_NED: 0.5, Msg.RC_CHANNELS: 0.5, Msg.SERVO_OUTPUT_RAW: 0.5,
+    Msg.RAW_IMU: 0.5, Msg.SCALED_IMU2: 0.5, Msg.SCALED_IMU3: 0.5, Msg.SCALED_PRESSURE: 0.5,
+    Msg.SCALED_PRESSURE2: 0.5, Msg.SCALED_PRESSURE3: 0.5, Msg.NAV_CONTROLLER_OUTPUT: 0.5, Msg.NAMED_VALUE_FLOAT: 0.5,
+}
+STREAM_INTERVALS_S: dict[int, float] = {**DEFAULT_INTERVALS_S, **ARDUSUB_EXTRA_INTERVALS_S}  # what can stream
+REQUESTABLE = frozenset(STREAM_INTERVALS_S) | {Msg.AUTOPILOT_VERSION}
 
 MAV_MODE_FLAG_CUSTOM_MODE_ENABLED = 1
 # POSITION_TARGET_TYPEMASK bits (1 = ignore).
@@ -121,15 +159,19 @@ class AutopilotSettings:
     """Timeouts and failsafe choices (the ArduSub parameters they stand for in comments)."""
 
     position_delay_s: float = 41.0  # EKF position after boot (SITL: ~41 s)
+    gps_delay_s: float = 9.0  # GPS found after boot (SITL: ~9 s); never later than position_delay_s
     heartbeat_timeout_s: float = 5.0  # FS_GCS_TIMEOUT; 0 disables (FS_GCS_ENABLE 0)
     failsafe: FailsafeAction = FailsafeAction.SURFACE  # FS_GCS_ENABLE action
     velocity_timeout_s: float = 3.0  # GUIDED velocity targets are zeroed after this
-    gcs_system: int = 255  # SYSID_MYGCS
-    companion_component: int = 191  # MAV_COMP_ID_ONBOARD_COMPUTER, tracked too (deviation, see module doc)
+    gcs_system: int = 255  # MAV_GCS_SYSID (SYSID_MYGCS): the only system whose heartbeats feed the failsafe
     prearm_delay_s: float = 3.0  # SYS_STATUS pre-arm bit
+    surface_depth_m: float = 0.1  # SURFACE_DEPTH (-10 cm): shallower than this is at the surface
+    tracking: Tracking = ARDUSUB_TRACKING  # how heading and depth follow their targets
 
     def __post_init__(self) -> None:
-        for name in ("position_delay_s", "heartbeat_timeout_s", "prearm_delay_s"):
+        if not 1 <= self.gcs_system <= 255:
+            raise ValueError(f"AutopilotSettings.gcs_system: expected a system id 1..255; got {self.gcs_system!r}")
+        for name in ("position_delay_s", "gps_delay_s", "heartbeat_timeout_s", "prearm_delay_s", "surface_depth_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"AutopilotSettings.{name}: expected a number >= 0; got {value!r}")
@@ -209,14 +251,18 @@ class Autopilot:
         """True once the EKF has an absolute horizontal position (EKF_POS_HORIZ_ABS)."""
         return now_s >= self.settings.position_delay_s
 
+    def gps_ok(self, now_s: float) -> bool:
+        """True once the GPS has been found; before, positions read lat = lon = 0 (as ArduSub's do)."""
+        return now_s >= min(self.settings.gps_delay_s, self.settings.position_delay_s)
+
     def prearm_ok(self, now_s: float) -> bool:
         return now_s >= self.settings.prearm_delay_s
 
     # -- inputs ---------------------------------------------------------------------------------
 
     def heartbeat(self, now_s: float, system: int, component: int) -> list[Output]:
-        """A HEARTBEAT arrived; tracked peers (GCS system, companion component) feed the failsafe."""
-        if system != self.settings.gcs_system and component != self.settings.companion_component:
+        """A HEARTBEAT arrived; only the GCS system's (MAV_GCS_SYSID, any component) feed the failsafe."""
+        if system != self.settings.gcs_system:
             return []
         self._last_heartbeat_s = now_s
         self._last_peer = (system, component)
@@ -242,6 +288,8 @@ class Autopilot:
             s, c = self._last_peer
             out.append(Text(Severity.CRITICAL, f"GCS Failsafe: heartbeat lost from {s}/{c}"))
             out.extend(self._failsafe_action(body))
+        if self.mode is SubMode.SURFACE and self.armed and body.depth_m <= self.settings.surface_depth_m:
+            self._enter(SubMode.ALT_HOLD, body)  # SURFACE_COMPLETE: ArduSub says nothing
         if not self.battery_failsafe and body.energy_used_wh >= self.battery_wh:
             self.battery_failsafe = True
             out.append(Text(Severity.CRITICAL, "Battery empty: surfacing"))
@@ -349,7 +397,7 @@ class Autopilot:
             out.append(Text(Severity.WARNING, f"Mode {value:g} not available in this simulator"))
             return Result.FAILED
         if mode is SubMode.GUIDED and not self.position_ok(now_s):
-            out.append(Text(Severity.WARNING, "GUIDED requires position"))
+            out.append(Text(Severity.WARNING, "Mode change failed: GUIDED requires position"))
             return Result.FAILED
         if mode is not self.mode:
             self._enter(mode, body)
@@ -380,12 +428,12 @@ class Autopilot:
 
     def _set_interval(self, message_id: float, interval_us: float, out: list[Output]) -> Result:
         msg_id = int(message_id) if math.isfinite(message_id) else -1
-        if msg_id not in DEFAULT_INTERVALS_S or not math.isfinite(interval_us):
+        if msg_id not in STREAM_INTERVALS_S or not math.isfinite(interval_us):
             return Result.FAILED
         if interval_us < 0:
             out.append(Interval(msg_id, None))  # -1: stop
         elif interval_us == 0:
-            out.append(Interval(msg_id, DEFAULT_INTERVALS_S[msg_id]))  # 0: default rate
+            out.append(Interval(msg_id, STREAM_INTERVALS_S[msg_id]))  # 0: default rate
         else:
             out.append(Interval(msg_id, interval_us / 1e6))
         return Result.ACCEPTED
@@ -407,10 +455,17 @@ class Autopilot:
 
     def _guided_yaw(self, type_mask: int, yaw_rad: float, yaw_rate_rad_s: float, body: Body,
                     *, relative: bool) -> YawFields:
-        """Yaw fields of a LOCAL_NED target; when both yaw bits say ignore, the previous yaw target stays."""
+        """Yaw fields of a LOCAL_NED target; when both yaw bits say ignore, the previous yaw target stays.
+
+        With a yaw, a yaw rate given too (YAW_RATE_IGNORE clear, non-zero) is the rate the heading
+        is slewed at (ArduSub's auto-yaw "look at heading" rate); without one, ArduSub's own slew.
+        """
         if not type_mask & _YAW_BIT and math.isfinite(yaw_rad):
             deg = math.degrees(yaw_rad) + (body.heading_deg if relative else 0.0)
-            return {"yaw_deg": deg % 360.0, "yaw_rate_deg_s": None, "turn": TurnDirection.SHORTEST}
+            rate = None
+            if not type_mask & _YAW_RATE_BIT and math.isfinite(yaw_rate_rad_s) and yaw_rate_rad_s != 0.0:
+                rate = abs(math.degrees(yaw_rate_rad_s))
+            return {"yaw_deg": deg % 360.0, "yaw_rate_deg_s": rate, "turn": TurnDirection.SHORTEST}
         if not type_mask & _YAW_RATE_BIT and math.isfinite(yaw_rate_rad_s):
             return {"yaw_deg": None, "yaw_rate_deg_s": math.degrees(yaw_rate_rad_s), "turn": TurnDirection.SHORTEST}
         g = self._guided
@@ -440,8 +495,8 @@ class Autopilot:
             self.setpoint = self._guided
         elif self.mode is SubMode.ALT_HOLD:
             self.setpoint = Setpoint(kind=SetpointKind.DEPTH, depth_m=self._hold_depth_m)
-        else:  # SURFACE: up at the glide rate, no horizontal thrust
-            self.setpoint = Setpoint(kind=SetpointKind.DEPTH, depth_m=0.0)
+        else:  # SURFACE: straight up at the autopilot's vertical rate, no horizontal thrust
+            self.setpoint = Setpoint(kind=SetpointKind.DEPTH, down_m_s=-self.settings.tracking.depth_rate_m_s)
 
 
 def _offset(lat_deg: float, lon_deg: float, north_m: float, east_m: float) -> tuple[float, float]:

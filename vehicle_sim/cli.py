@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # at run time imported where used, as below: registering the 
 EXIT_BAD_INPUT = 2
 READY_PREFIX = "lrauv sim: listening on udp "
 FAILSAFE_CHOICES = ("surface", "alt_hold", "disarm", "warn")
+PROFILE_CHOICES = ("lrauv", "ardusub")
 # ArduSub's autotest start location (ArduPilot Tools/autotest/locations.txt), used with --calm.
 _CALM_START = "-118.393867,33.810313"
 
@@ -70,10 +71,23 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                         "0 (default) makes a dive repeat exactly, a few seconds ride out a lossy link")
     p.add_argument("--listen", default="127.0.0.1:14560", help="HOST:PORT to bind; port 0 = any free port")
     p.add_argument("--seed", default="0", help="seed of the sensor noise (default 0)")
+    p.add_argument("--profile", default="lrauv",
+                   help="ardusub: every ArduSub-faithful choice at once (its other default streams, the GCS failsafe "
+                        "disarms, an idle vehicle floats up), for a parity test with ArduSub SITL; lrauv (default): "
+                        "the simulator's defaults. Flags given explicitly win over the profile")
     p.add_argument("--position-delay-s", default="41", help="seconds until the EKF has a position (default 41)")
+    p.add_argument("--gps-delay-s", default="9",
+                   help="seconds until the GPS is found; before, positions read lat = lon = 0 (default 9)")
     p.add_argument("--heartbeat-timeout-s", default="5",
-                   help="heartbeat failsafe timeout, simulated s; 0 disables (default 5)")
-    p.add_argument("--failsafe", default="surface", help=f"heartbeat failsafe action: {'|'.join(FAILSAFE_CHOICES)}")
+                   help="GCS heartbeat failsafe timeout, simulated s; 0 disables (default 5)")
+    p.add_argument("--gcs-sysid", default="255",
+                   help="MAV_GCS_SYSID: the only system whose heartbeats feed the failsafe; it never fires before "
+                        "one was heard (default 255, a ground station; 1 makes the executive's count)")
+    p.add_argument("--failsafe", help=f"heartbeat failsafe action: {'|'.join(FAILSAFE_CHOICES)} "
+                                      "(default surface; disarm with --profile ardusub)")
+    p.add_argument("--ardusub-streams", action=argparse.BooleanOptionalAction, default=None,
+                   help="also stream ArduSub's 19 other default messages (AHRS2, SIMSTATE, NAMED_VALUE_FLOAT, ...: "
+                        "110 messages per vehicle second instead of 35; off by default, on with --profile ardusub)")
     p.add_argument("--duration-s", help="stop after this many simulated seconds (default: run until stopped)")
     p.add_argument("--track", type=Path, help="CSV of the true track, one row per simulated second")
     p.add_argument("--mission", type=Path,
@@ -149,8 +163,11 @@ def wait_ready(sim: subprocess.Popen[str], *, timeout_s: float = 60.0) -> int:
 
 def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None]:
     """(World or TruthSequence, SimConfig, duration_s or None) from the flags."""
+    from dataclasses import replace
+
     from vehicle_sim.autopilot import AutopilotSettings, FailsafeAction
     from vehicle_sim.endpoint import SimConfig
+    from vehicle_sim.profile import Profile, with_profile
     from vehicle_sim.world import World, load_truth
 
     speedup = _number(args.speedup, "--speedup", "a number > 0", lambda x: x > 0)
@@ -159,6 +176,12 @@ def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None
     depth_m = _number(args.depth_m, "--depth-m", "a depth in metres >= 0", lambda x: x >= 0)
     heading = _number(args.heading_deg, "--heading-deg", "a compass heading in degrees", lambda x: True)
     delay = _number(args.position_delay_s, "--position-delay-s", "seconds >= 0", lambda x: x >= 0)
+    gps_delay = _number(args.gps_delay_s, "--gps-delay-s", "seconds >= 0", lambda x: x >= 0)
+    gcs_sysid = _integer(args.gcs_sysid, "--gcs-sysid")
+    if not 1 <= gcs_sysid <= 255:
+        raise SimError(f"--gcs-sysid {args.gcs_sysid!r}: expected a MAVLink system id 1..255")
+    if args.profile not in PROFILE_CHOICES:
+        raise SimError(f"--profile {args.profile!r}: expected one of {', '.join(PROFILE_CHOICES)}")
     hb_timeout = _number(args.heartbeat_timeout_s, "--heartbeat-timeout-s", "seconds >= 0 (0 disables)",
                          lambda x: x >= 0)
     slack = _number(args.lockstep_slack_s, "--lockstep-slack-s", "simulated seconds >= 0", lambda x: x >= 0)
@@ -166,7 +189,7 @@ def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None
     duration = None
     if args.duration_s is not None:
         duration = _number(args.duration_s, "--duration-s", "simulated seconds > 0", lambda x: x > 0)
-    if args.failsafe not in FAILSAFE_CHOICES:
+    if args.failsafe is not None and args.failsafe not in FAILSAFE_CHOICES:
         raise SimError(f"--failsafe {args.failsafe!r}: expected one of {', '.join(FAILSAFE_CHOICES)}")
 
     world: Truth
@@ -189,16 +212,19 @@ def _configure(args: argparse.Namespace) -> tuple[Truth, SimConfig, float | None
     config = SimConfig(
         start_lat_deg=lat, start_lon_deg=lon, start_depth_m=depth_m, start_heading_deg=heading % 360.0,
         start_offset_s=offset_s, speedup=speedup, host=host, port=port, seed=seed,
-        autopilot=AutopilotSettings(position_delay_s=delay, heartbeat_timeout_s=hb_timeout,
-                                    failsafe=FailsafeAction(args.failsafe)),
+        autopilot=AutopilotSettings(position_delay_s=delay, gps_delay_s=gps_delay, heartbeat_timeout_s=hb_timeout,
+                                    gcs_system=gcs_sysid),
         track_path=args.track, lockstep_slack_s=slack if lockstep else None,
     )
     if getattr(args, "mission", None) is not None:  # one set of vehicle figures for planner and simulator
-        from dataclasses import replace
-
         from planner.contract.mission import load_mission
 
         config = replace(config, params=load_mission(args.mission).settings.vehicle)
+    config = with_profile(config, Profile(args.profile))
+    if args.failsafe is not None:  # explicit flags win over the profile
+        config = replace(config, autopilot=replace(config.autopilot, failsafe=FailsafeAction(args.failsafe)))
+    if args.ardusub_streams is not None:
+        config = replace(config, ardusub_streams=args.ardusub_streams)
     return world, config, duration
 
 

@@ -1,11 +1,18 @@
 """The simulated vehicle on the network: MAVLink 2 over UDP, paced like ArduPilot SITL's ``--speedup``.
 
-The only module of the simulator that imports pymavlink. A ``Simulator`` binds one UDP
+With ``streams``, the only modules of the simulator that import pymavlink. A ``Simulator`` binds one UDP
 socket, learns its peers from the datagrams it receives and sends everything to every peer
 heard in the last ``peer_timeout_s`` wall seconds (as ArduPilot routes). It speaks as
 system 1, component 1, a SUBMARINE with ArduPilot custom modes, and streams telemetry at
 ArduSub's default rates (as observed on ArduSub SITL), changeable with
-MAV_CMD_SET_MESSAGE_INTERVAL. Every time field (``time_boot_ms``) is *simulated* time.
+MAV_CMD_SET_MESSAGE_INTERVAL (interval -1 stops a stream, 0 restores its default, as
+ArduPilot does). Every time field (``time_boot_ms``) is *simulated* time. By default it
+streams the eight messages the executive reads; ``SimConfig.ardusub_streams`` adds ArduSub's
+nineteen other default streams (``vehicle_sim.streams``): 110 messages per vehicle second
+instead of 35, so off by default (at a speedup of 1000 that is 110,000 messages per wall
+second for every closed loop to parse). Positions carry an EKF-like error
+(``dynamics.drift_error``, stepped every physics step, so the noise does not depend on which
+streams are on), and read lat = lon = 0 until the GPS is found.
 
 The main loop steps the physics every ``dt_s`` of simulated time (telemetry can therefore
 stream at most at 1 / dt_s = 10 Hz by default), polls the socket without blocking, sends
@@ -51,6 +58,7 @@ from typing import Any, TextIO
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from vehicle_sim.autopilot import (
+    ARDUSUB_EXTRA_INTERVALS_S,
     DEFAULT_INTERVALS_S,
     Ack,
     Autopilot,
@@ -62,8 +70,18 @@ from vehicle_sim.autopilot import (
     Text,
     clip_text,
 )
-from vehicle_sim.dynamics import Body, Reading, battery_remaining, observe, power_w, step
+from vehicle_sim.dynamics import (
+    Body,
+    Reading,
+    battery_remaining,
+    drift_error,
+    initial_error,
+    observe,
+    power_w,
+    step,
+)
 from planner.contract.vehicle import VehicleParams
+from vehicle_sim.streams import send_extra
 from vehicle_sim.world import Truth
 
 SYSTEM_ID = 1
@@ -83,7 +101,8 @@ _EKF_POSITION = (mavlink.EKF_ATTITUDE | mavlink.EKF_VELOCITY_HORIZ | mavlink.EKF
 _CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
                  | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
                  | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT)
-_NEEDS_READING = frozenset({Msg.GLOBAL_POSITION_INT, Msg.ATTITUDE, Msg.VFR_HUD})
+_NEEDS_READING = frozenset({Msg.GLOBAL_POSITION_INT, Msg.ATTITUDE, Msg.VFR_HUD, Msg.AHRS2, Msg.TERRAIN_REPORT,
+                            Msg.GPS_RAW_INT, Msg.LOCAL_POSITION_NED, Msg.SCALED_PRESSURE2})
 _MAX_LAG_WALL_S = 0.25  # behind by more than this: stop trying to catch up (run flat out from here)
 _MIN_SLEEP_S = 0.0005
 _LOCKSTEP_POLL_WALL_S = 0.05  # longest select while waiting for a lockstep report
@@ -105,6 +124,9 @@ class SimConfig:
     host: str = "127.0.0.1"
     port: int = 14560  # 0: ephemeral
     seed: int = 0  # sensor noise
+    # Time constant of the position estimate's error (standard deviation: params.position_noise_m).
+    position_error_tau_s: float = 30.0
+    ardusub_streams: bool = False  # also ArduSub's 19 other default streams (module docstring)
     dt_s: float = 0.1  # physics step (simulated)
     params: VehicleParams = field(default_factory=VehicleParams)
     autopilot: AutopilotSettings = field(default_factory=AutopilotSettings)
@@ -122,6 +144,8 @@ class SimConfig:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.speedup) and self.speedup > 0):
             raise ValueError(f"SimConfig.speedup: expected a number > 0; got {self.speedup!r}")
+        if not (math.isfinite(self.position_error_tau_s) and self.position_error_tau_s > 0):
+            raise ValueError(f"SimConfig.position_error_tau_s: expected seconds > 0; got {self.position_error_tau_s!r}")
         if not (0.001 <= self.dt_s <= 1.0):
             raise ValueError(f"SimConfig.dt_s: expected 0.001..1 s; got {self.dt_s!r}")
         if self.lockstep_slack_s is not None and not (math.isfinite(self.lockstep_slack_s)
@@ -209,7 +233,10 @@ class Simulator:
         self._dt_ms = max(1, round(config.dt_s * 1000))
         self._dt_s = self._dt_ms / 1000.0
         self._rng = random.Random(config.seed)
+        self._error = initial_error(config.params.position_noise_m, config.position_error_tau_s, self._rng)
         self._streams = [_Stream(int(k), round(v * 1000)) for k, v in DEFAULT_INTERVALS_S.items()]
+        self._streams += [_Stream(int(k), round(v * 1000) if config.ardusub_streams else None)
+                          for k, v in ARDUSUB_EXTRA_INTERVALS_S.items()]
 
         self._track: TextIO | None = None
         self._track_every_ms = max(self._dt_ms, round(config.track_interval_s * 1000))
@@ -348,7 +375,9 @@ class Simulator:
         if events:
             self._do(events)
         current = self.world.current_at(self.config.start_offset_s + now_s, body.lat_deg, body.lon_deg, body.depth_m)
-        self._body = step(body, ap.setpoint, current, self.params, self._dt_s)
+        self._body = step(body, ap.setpoint, current, self.params, self._dt_s, self.config.autopilot.tracking)
+        self._error = drift_error(self._error, self.params.position_noise_m, self.config.position_error_tau_s,
+                                  self._dt_s, self._rng)
         self._t_ms += self._dt_ms
         timed = self._timed_sent_ms
         self._send_due()
@@ -524,12 +553,12 @@ class Simulator:
             if s.due_ms <= now:
                 s.due_ms = now + interval
             if s.msg_id in _NEEDS_READING and reading is None:
-                reading = observe(self._body, self.params, self._rng)
+                reading = self._observe()
             if live:
                 self._send(s.msg_id, reading)
 
     def _observe(self) -> Reading:
-        return observe(self._body, self.params, self._rng)
+        return observe(self._body, self.params, self._rng, self._error)
 
     def _send(self, msg_id: int, reading: Reading | None) -> None:
         mav = self._mav
@@ -542,8 +571,10 @@ class Simulator:
             self._timed_sent_ms = t_ms
         if msg_id == Msg.GLOBAL_POSITION_INT:
             alt_mm = round(-reading.depth_m * 1000.0)  # Sub: altitude negative below the surface
+            gps = ap.gps_ok(t_ms / 1000.0)  # before the GPS is found ArduSub sends lat = lon = 0
             mav.global_position_int_send(
-                t_ms, round(reading.lat_deg * 1e7), round(reading.lon_deg * 1e7), alt_mm, alt_mm,
+                t_ms, round(reading.lat_deg * 1e7) if gps else 0, round(reading.lon_deg * 1e7) if gps else 0,
+                alt_mm, alt_mm,
                 _i16(b.ground_north_m_s * 100.0), _i16(b.ground_east_m_s * 100.0), _i16(b.down_m_s * 100.0),
                 round(reading.heading_deg * 100.0) % 36000)
         elif msg_id == Msg.ATTITUDE:
@@ -589,6 +620,7 @@ class Simulator:
         elif msg_id == Msg.AUTOPILOT_VERSION:
             mav.autopilot_version_send(_CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
         else:
+            self.stats.messages_out += send_extra(mav, msg_id, t_ms, b, reading, ap, self.params)
             return
         self.stats.messages_out += 1
 

@@ -1,8 +1,8 @@
 """The simulated vehicle: pure physics and currents, then ArduSub behaviour over real UDP and MAVLink.
 
 Most UDP tests drive the ``Simulator`` step by step (``step_once``) from the test thread while a
-pymavlink ``udpout`` peer talks to it over 127.0.0.1: simulated time is then exact and the
-tests are deterministic. A few run it in a background thread at a high speedup, and the CLI
+pymavlink ``udpout`` peer talks to it over 127.0.0.1 (``tests.vehicle_sim.harness``): simulated
+time is then exact and the tests are deterministic. A few run it in a background thread at a high speedup, and the CLI
 as a subprocess; every simulator, thread and process is stopped by the test that started it.
 """
 
@@ -12,7 +12,6 @@ import csv
 import math
 import os
 import random
-import select
 import signal
 import socket
 import subprocess
@@ -24,7 +23,6 @@ from pathlib import Path
 import pytest
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from vehicle_sim.autopilot import AutopilotSettings  # noqa: E402
@@ -34,6 +32,7 @@ from vehicle_sim.dynamics import (  # noqa: E402
     Body,
     Setpoint,
     SetpointKind,
+    PositionError,
     VehicleParams,
     observe,
     step,
@@ -43,11 +42,10 @@ from vehicle_sim.world import World  # noqa: E402
 
 from tests.support import REPO  # noqa: E402
 from tests.support.helpers import sim_cli  # noqa: E402
+from tests.vehicle_sim.harness import DT, QUIET, Peer, north_m, vel_yaw  # noqa: E402
 
 WATER = (33.45, -118.10)  # lat, lon of open water in the synthetic forecast
 LAND = (33.69, -117.71)  # the north-east corner: coast
-QUIET = VehicleParams(position_noise_m=0.0, heading_noise_deg=0.0, depth_noise_m=0.0)
-DT = 0.1
 
 # -- pure physics ------------------------------------------------------------------------
 
@@ -135,6 +133,9 @@ def test_noise_only_on_readings_and_repeatable_from_a_seed():
     b = [observe(body, noisy, rng) for rng in [random.Random(3)] for _ in range(5)]
     assert a == b and len(set(a)) == 5
     assert observe(body, QUIET, random.Random(3)) == (33.0, -118.0, 2.0, 10.0)
+    off = observe(body, QUIET, random.Random(3), PositionError(north_m=10.0, east_m=-5.0))
+    assert north_m(Body(lat_deg=off.lat_deg), 33.0) == pytest.approx(10.0)
+    assert off.lon_deg < -118.0 and (off.depth_m, off.heading_deg) == (2.0, 10.0)
 
 
 # -- the world -------------------------------------------------------------------------------
@@ -204,113 +205,6 @@ def test_calm_and_uniform_worlds():
     assert World.calm().is_water(0.0, 0.0, 1000.0)
 
 
-# -- UDP harness -----------------------------------------------------------------------------
-
-
-class Peer:
-    """A pymavlink peer of the simulator: a GCS (255/190) or the companion computer (1/191)."""
-
-    def __init__(self, port: int, system: int = 255, component: int = 190) -> None:
-        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=system,
-                                               source_component=component, dialect="ardupilotmega")
-        self.mav = self.conn.mav
-        self.got: list = []  # type: ignore[type-arg]
-
-    def heartbeat(self) -> None:
-        self.mav.heartbeat_send(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE)
-
-    def command(self, command: int, *params: float, target=(1, 1)) -> None:  # type: ignore[no-untyped-def]
-        p = list(params) + [0.0] * (7 - len(params))
-        self.mav.command_long_send(target[0], target[1], command, 0, *p)
-
-    def drain(self, wait_s: float = 0.0) -> list:  # type: ignore[type-arg]
-        """Everything that has arrived (waiting up to ``wait_s`` for the first datagram)."""
-        if wait_s:
-            select.select([self.conn.port], [], [], wait_s)
-        new = []
-        while (msg := self.conn.recv_msg()) is not None:
-            if msg.get_type() != "BAD_DATA":
-                new.append(msg)
-        self.got.extend(new)
-        return new
-
-    def of(self, kind: str) -> list:  # type: ignore[type-arg]
-        return [m for m in self.got if m.get_type() == kind]
-
-    def texts(self) -> list[str]:
-        return [m.text for m in self.of("STATUSTEXT")]
-
-    def acks(self, command: int) -> list[int]:
-        return [m.result for m in self.of("COMMAND_ACK") if m.command == command]
-
-    def close(self) -> None:
-        self.conn.close()
-
-
-class Bench:
-    """A simulator stepped from the test thread, and one peer that keeps its heartbeat going."""
-
-    def __init__(self, world: World | None = None, *, lat_lon=(33.0, -118.0), depth_m: float = 0.0,  # type: ignore[no-untyped-def]
-                 heading_deg: float = 0.0, system: int = 255, component: int = 190, params=QUIET,
-                 **autopilot) -> None:  # type: ignore[no-untyped-def]
-        settings = AutopilotSettings(**{"position_delay_s": 2.0, **autopilot})
-        config = SimConfig(start_lat_deg=lat_lon[0], start_lon_deg=lat_lon[1], start_depth_m=depth_m,
-                           start_heading_deg=heading_deg, port=0, speedup=1e9, params=params, autopilot=settings)
-        self.sim = Simulator(world or World.calm(), config)
-        self.peer = Peer(self.sim.port, system, component)
-        self.beating = True
-        self.peer.heartbeat()
-        self.step(1)
-
-    def step(self, n: int) -> None:
-        for _ in range(n):
-            before = self.sim._t_ms
-            self.sim.step_once()
-            if self.beating and before // 1000 != self.sim._t_ms // 1000:  # 1 Hz heartbeat, in simulated time
-                self.peer.heartbeat()
-            self.peer.drain()
-
-    def advance(self, seconds: float) -> None:
-        self.step(round(seconds / DT))
-
-    def command(self, command: int, *params: float, target=(1, 1)) -> None:  # type: ignore[no-untyped-def]
-        self.peer.command(command, *params, target=target)
-        self.step(1)
-        self.peer.drain(0.05)
-
-    def guided_and_armed(self) -> None:
-        self.advance(self.sim.config.autopilot.position_delay_s)
-        self.command(mavlink.MAV_CMD_DO_SET_MODE, 1, SubMode.GUIDED)
-        self.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-        assert self.sim.mode is SubMode.GUIDED and self.sim.armed
-
-    def close(self) -> None:
-        self.peer.close()
-        self.sim.close()
-
-
-@pytest.fixture()
-def bench():
-    made: list[Bench] = []
-
-    def make(*args, **kwargs) -> Bench:  # type: ignore[no-untyped-def]
-        made.append(Bench(*args, **kwargs))
-        return made[-1]
-
-    yield make
-    for b in made:
-        b.close()
-
-
-def _vel_yaw(peer: Peer, north: float, east: float, yaw_deg: float, mask: int = 2503) -> None:
-    peer.mav.set_position_target_local_ned_send(0, 1, 1, mavlink.MAV_FRAME_LOCAL_NED, mask, 0, 0, 0,
-                                                north, east, 0.0, 0, 0, 0, math.radians(yaw_deg), 0)
-
-
-def _north_m(b: Body, lat0: float) -> float:
-    return (b.lat_deg - lat0) * M_PER_DEG_LAT
-
-
 # -- identity, modes, arming, rates ----------------------------------------------------------------
 
 
@@ -335,7 +229,7 @@ def test_guided_is_refused_until_the_position_estimate_exists(bench):
     assert not b.peer.of("EKF_STATUS_REPORT")[-1].flags & mavlink.EKF_POS_HORIZ_ABS
     b.command(mavlink.MAV_CMD_DO_SET_MODE, 1, SubMode.GUIDED)
     assert b.peer.acks(mavlink.MAV_CMD_DO_SET_MODE) == [mavlink.MAV_RESULT_FAILED]
-    assert "GUIDED requires position" in b.peer.texts()
+    assert "Mode change failed: GUIDED requires position" in b.peer.texts()  # ArduSub's words
     assert b.sim.mode is SubMode.MANUAL
     b.advance(32.0)  # past 41 s
     assert b.peer.of("EKF_STATUS_REPORT")[-1].flags & mavlink.EKF_POS_HORIZ_ABS
@@ -430,9 +324,9 @@ def test_local_ned_velocity_moves_north_and_expires_after_3_s(bench):
     b.guided_and_armed()
     lat0 = b.sim.body.lat_deg
     for _ in range(20):  # 1 m/s north, yaw 0, re-sent at 1 Hz for 20 s
-        _vel_yaw(b.peer, 1.0, 0.0, 0.0)
+        vel_yaw(b.peer, 1.0, 0.0, 0.0)
         b.advance(1.0)
-    moved = _north_m(b.sim.body, lat0)
+    moved = north_m(b.sim.body, lat0)
     assert 15.0 < moved < 20.0 and b.sim.body.water_north_m_s == pytest.approx(1.0)
     # The last update was 1 s ago: still going until 3 s after it ...
     b.advance(1.9)
@@ -455,10 +349,10 @@ def test_global_int_yaw_is_ignored_but_condition_yaw_turns(bench):
         math.radians(90.0), 0)
     b.advance(2.9)
     assert b.sim.body.heading_deg == 0.0 and b.sim.body.water_north_m_s == pytest.approx(0.5)
-    b.command(mavlink.MAV_CMD_CONDITION_YAW, 90.0, 0.0, 1.0, 0.0)
+    b.command(mavlink.MAV_CMD_CONDITION_YAW, 90.0, 0.0, 1.0, 0.0)  # no rate: ArduSub's own slew
     assert b.peer.acks(mavlink.MAV_CMD_CONDITION_YAW) == [mavlink.MAV_RESULT_ACCEPTED]
-    b.advance(4.5)
-    assert b.sim.body.heading_deg == pytest.approx(46.0)  # 10 deg/s for 4.6 s (the command's step too)
+    b.advance(0.9)
+    assert b.sim.body.heading_deg == pytest.approx(30.0)  # 30 deg/s for 1.0 s (the command's step too)
     b.advance(10.0)
     assert b.sim.body.heading_deg == pytest.approx(90.0)
     b.command(mavlink.MAV_CMD_CONDITION_YAW, 45.0, 5.0, -1.0, 1.0)  # 45 deg to the left, 5 deg/s
@@ -471,9 +365,11 @@ def test_global_int_yaw_is_ignored_but_condition_yaw_turns(bench):
 def test_local_ned_yaw_and_global_int_position_target(bench):
     b = bench()
     b.guided_and_armed()
-    _vel_yaw(b.peer, 0.0, 0.0, 200.0)  # shortest way: 160 deg counter-clockwise
-    b.advance(8.0)
-    assert b.sim.body.heading_deg == pytest.approx(280.0, abs=0.6)
+    vel_yaw(b.peer, 0.0, 0.0, 200.0)  # shortest way: 160 deg counter-clockwise
+    b.advance(3.0)
+    assert b.sim.body.heading_deg == pytest.approx(270.0, abs=0.6)  # at ArduSub's 30 deg/s
+    b.advance(5.0)
+    assert b.sim.body.heading_deg == pytest.approx(200.0)
     lat0, lon0 = b.sim.body.lat_deg, b.sim.body.lon_deg
     goal_lat = lat0 + 10.0 / M_PER_DEG_LAT
     goal_lon = lon0 + 10.0 / (M_PER_DEG_LAT * math.cos(math.radians(lat0)))
@@ -489,32 +385,32 @@ def test_local_ned_yaw_and_global_int_position_target(bench):
     assert b.sim.body.depth_m == pytest.approx(3.0)
 
 
-def test_alt_hold_depth_target_changes_depth_at_the_glide_rate_and_drifts(bench):
+def test_alt_hold_depth_target_is_reached_at_ardusubs_rate_and_the_vehicle_drifts(bench):
     b = bench(World.uniform(0.1, 0.0))
     b.command(mavlink.MAV_CMD_DO_SET_MODE, 1, SubMode.ALT_HOLD)
     b.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     b.peer.mav.set_position_target_global_int_send(
         0, 1, 1, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 3579, 0, 0, -5.0, 0, 0, 0, 0, 0, 0, 0, 0)
     lon0 = b.sim.body.lon_deg
-    b.advance(10.0)
-    assert b.sim.body.depth_m == pytest.approx(2.0, abs=0.05)  # 0.2 m/s
-    b.advance(20.0)
+    b.advance(2.0)
+    assert b.sim.body.depth_m == pytest.approx(2.0, abs=0.15)  # about 1 m/s, not the mission's glide rate
+    b.advance(28.0)
     assert b.sim.body.depth_m == pytest.approx(5.0)
     assert b.peer.of("GLOBAL_POSITION_INT")[-1].relative_alt == -5000
     east_m = (b.sim.body.lon_deg - lon0) * M_PER_DEG_LAT * math.cos(math.radians(33.0))
     assert east_m == pytest.approx(0.1 * 30.0, abs=0.15)  # no horizontal thrust: drifts with the current
     b.command(mavlink.MAV_CMD_DO_SET_MODE, 1, SubMode.SURFACE)
-    b.advance(20.0)
-    assert b.sim.body.depth_m == pytest.approx(1.0, abs=0.05)
-    b.advance(10.0)
-    assert b.sim.body.depth_m == 0.0
+    b.advance(3.0)
+    assert b.sim.body.depth_m == pytest.approx(1.9, abs=0.05) and b.sim.mode is SubMode.SURFACE  # up at 1 m/s
+    b.advance(5.0)
+    assert b.sim.body.depth_m <= 0.1 and b.sim.mode is SubMode.ALT_HOLD  # at the surface: SURFACE_COMPLETE
 
 
 # -- failsafes ------------------------------------------------------------------------------------------
 
 
-def test_companion_heartbeat_loss_surfaces_and_regains(bench):
-    b = bench(system=1, component=191, depth_m=5.0)
+def test_gcs_heartbeat_loss_surfaces_and_regains(bench):
+    b = bench(system=255, component=190, depth_m=5.0)
     b.guided_and_armed()
     b.beating = False
     b.advance(4.0)
@@ -526,12 +422,13 @@ def test_companion_heartbeat_loss_surfaces_and_regains(bench):
     b.advance(1.0)
     hb = [m for m in b.peer.of("HEARTBEAT") if m.get_srcComponent() == 1][-1]
     assert hb.custom_mode == SubMode.SURFACE and hb.system_status == mavlink.MAV_STATE_CRITICAL
-    b.advance(10.0)
-    assert b.sim.body.depth_m < 5.0 - 0.2 * 10.0
+    assert 2.5 < b.sim.body.depth_m < 4.5  # up at 1 m/s since the failsafe, 1 to 2 s ago
     b.beating = True
     b.advance(2.0)
     assert any("heartbeat regained" in t for t in b.peer.texts())
     assert b.sim.mode is SubMode.SURFACE  # stays where the failsafe put it
+    b.advance(5.0)
+    assert b.sim.mode is SubMode.ALT_HOLD and b.sim.body.depth_m <= 0.1  # until the surface
 
 
 @pytest.mark.parametrize(("action", "mode", "armed"), [("alt_hold", SubMode.ALT_HOLD, True),
@@ -553,7 +450,8 @@ def test_an_untracked_peer_does_not_feed_the_failsafe_and_an_empty_battery_surfa
     b.guided_and_armed()
     b.advance(30.0)  # untracked heartbeats: no failsafe ever started
     assert not any("heartbeat lost" in t for t in b.peer.texts())
-    assert "Battery empty: surfacing" in b.peer.texts() and b.sim.mode is SubMode.SURFACE
+    assert "Battery empty: surfacing" in b.peer.texts()
+    assert b.sim.mode is SubMode.ALT_HOLD and b.sim.body.depth_m <= 0.1  # surfaced, then SURFACE_COMPLETE
     assert b.peer.of("BATTERY_STATUS")[-1].battery_remaining == 0
 
 
@@ -593,7 +491,7 @@ def _scripted_run(track: Path, seed: int, world: World) -> list[tuple[int, int, 
                 peer.command(mavlink.MAV_CMD_DO_SET_MODE, 1, SubMode.GUIDED)
                 peer.command(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1)
             if 30 < k < 800 and k % 10 == 5:
-                _vel_yaw(peer, 0.6, 0.6, 45.0)
+                vel_yaw(peer, 0.6, 0.6, 45.0)
             sim.step_once()
             peer.drain()
     finally:
