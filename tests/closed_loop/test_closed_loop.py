@@ -19,6 +19,9 @@ from tests.support.helpers import assert_audit_clean, start_west_of_goal, wait_u
 from tests.support.linkfault import Faults, LinkFaultProxy
 from tests.support.loop_rig import FAILSAFE_SLACK_S, SPEEDUP, ExecThread, Sim
 
+# SURFACE, or ALT_HOLD once at the surface: ArduSub completes SURFACE by itself (SURFACE_COMPLETE).
+SURFACED = (SubMode.SURFACE, SubMode.ALT_HOLD)
+
 pytestmark = pytest.mark.slow
 
 
@@ -48,9 +51,10 @@ def test_demo_processes_reach_the_goal(demo_plan, synthetic_forecast, tmp_path):
 def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan, synthetic_forecast, tmp_path):
     lon, lat = start_west_of_goal(demo_plan.table, cells=2)  # two cells: thousands of lossy messages, a shorter suite
     # Lockstep with slack (docs/executive.md, "Lockstep with the simulator"): a lost step does not stall
-    # the simulator, and 1.5 s keeps the executive's heartbeats within ArduSub's 5 s failsafe.
+    # the simulator, and 1.5 s keeps the executive's heartbeats within ArduSub's 5 s failsafe (which
+    # counts them: MAV_GCS_SYSID set to the executive's system, 1).
     sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10",
-              "--lockstep-slack-s", f"{FAILSAFE_SLACK_S:g}")
+              "--lockstep-slack-s", f"{FAILSAFE_SLACK_S:g}", "--gcs-sysid", "1")
     relay = LinkFaultProxy(sim.port, speedup=SPEEDUP, seed=7, down=Faults(loss=0.25, duplicate=0.10, reorder=0.05))
     ex = None
     try:
@@ -72,7 +76,10 @@ def test_executive_copes_with_lost_duplicated_and_reordered_telemetry(demo_plan,
 
 def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synthetic_forecast, tmp_path):
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)
-    sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "5")
+    # ArduSub counts only MAV_GCS_SYSID's heartbeats: set to the executive's system (1), as on a vehicle
+    # whose companion computer is its ground station.
+    sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--heartbeat-timeout-s", "5",
+              "--gcs-sysid", "1")
     relay = LinkFaultProxy(sim.port, speedup=SPEEDUP)
     ex = ExecThread(demo_plan.table, relay.port, tmp_path / "hb.mcap")
     try:
@@ -80,7 +87,7 @@ def test_simulator_fails_safe_when_the_executive_heartbeat_stops(demo_plan, synt
         time.sleep(0.2)
         ex.stop()  # the executive's process dies: no more heartbeats from component 191
         assert wait_until(lambda: any("heartbeat lost" in t for _, t in relay.texts), 20), relay.texts
-        assert wait_until(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
+        assert wait_until(lambda: relay.mode() in SURFACED, 20), relay.modes[-3:]
     finally:
         ex.stop()
         relay.close()
@@ -98,7 +105,7 @@ def test_executive_fails_safe_when_the_autopilot_goes_silent(demo_plan, syntheti
         time.sleep(0.2)
         relay.cut(up=False, down=True)  # telemetry no longer reaches the executive; its commands still reach the vehicle
         # After the timeout it asks for SURFACE.
-        assert wait_until(lambda: relay.mode() == SubMode.SURFACE, 20), relay.modes[-3:]
+        assert wait_until(lambda: relay.mode() in SURFACED, 20), relay.modes[-3:]
         relay.cut(up=False, down=False)
         summary = ex.stop()
     finally:

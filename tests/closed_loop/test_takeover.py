@@ -21,6 +21,7 @@ from planner.contract.modes import SubMode
 from planner.shore.mission_client import upload_goals
 from tests.support.helpers import DEMO_MISSION, start_west_of_goal
 from tests.support.live_rig import Live
+from vehicle_sim.autopilot import AutopilotSettings
 
 pytestmark = pytest.mark.slow
 
@@ -31,7 +32,10 @@ def test_a_pilot_taking_manual_keeps_the_vehicle_until_a_mission_upload(demo_pla
     table = demo_plan.table
     mission = load_mission(DEMO_MISSION)
     plan = goal_tables.MissionPlan(goals=mission.goals, tables=(table,))
-    live = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table))
+    # FS_GCS_ENABLE 0: the pilot's station (system 255) is heard once, and ArduSub's GCS failsafe would
+    # otherwise fire 5 s after its last heartbeat.
+    live = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=start_west_of_goal(table),
+                autopilot=AutopilotSettings(heartbeat_timeout_s=0.0))
     pilot = mavutil.mavlink_connection(f"udpout:127.0.0.1:{live.sim.port}", source_system=255, source_component=190)
     try:
         assert live.wait(live.running), "the executive did not start following the plan"
