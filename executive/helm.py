@@ -169,6 +169,7 @@ class HelmState:
     seen_failsafe: bool = False
     asked_modes: tuple[tuple[int, float], ...] = ()
     overridden: str | None = None  # why the executive yielded (phase OVERRIDDEN); None when it has not
+    silent: bool = False  # the link was lost while overridden (the override stands through it)
     # The safety stop: the limit that fired. It holds for the run (reboots, restarts, uploads) until an operator clears it.
     stop: Situation | None = None
     breach: Situation | None = None  # a limit exceeded, not yet for breach_window_s
@@ -231,6 +232,9 @@ def step(
     out = _Out()
     if not link_ok:
         return _link_lost(helm, config, now_s, out)
+    if helm.silent:
+        out.events.append(Event("info", "link regained; still overridden: commanding nothing until an operator resumes"))
+        helm = replace(helm, silent=False)
     if helm.phase in (Phase.WAIT_LINK, Phase.LINK_LOST):
         regained = helm.phase is Phase.LINK_LOST
         text = "link regained: setting up again" if regained else "autopilot heartbeat received"
@@ -335,6 +339,11 @@ def _mode_due(helm: HelmState, mode: SubMode, now_s: float, config: HelmConfig) 
 def _link_lost(helm: HelmState, config: HelmConfig, now_s: float, out: _Out) -> Tick:
     if helm.phase is Phase.WAIT_LINK:
         return Tick(helm)
+    if helm.phase is Phase.OVERRIDDEN:  # a person or a failsafe has the vehicle: a silence changes nothing of that
+        if not helm.silent:
+            out.events.append(Event("warning", f"link lost while overridden: no autopilot heartbeat for"
+                                               f" {config.link_loss_timeout_s:g} s; still commanding nothing"))
+        return Tick(replace(helm, silent=True), (), tuple(out.events))
     mode = BREACH_MODE[config.on_breach]
     if helm.phase is not Phase.LINK_LOST:
         out.events.append(Event("error", f"link lost: no autopilot heartbeat for {config.link_loss_timeout_s:g} s;"

@@ -190,3 +190,24 @@ def test_the_safety_stop_holds_across_a_reboot_and_a_restart_until_mission_start
     assert any("safety stop (too_deep) cleared by MAV_CMD_MISSION_START" in e for e in events), events
     assert durable.load(state_dir).safety_stop == "too_deep"  # the second run had no state dir of its own
     assert_audit_clean(again.rig.log_path)
+
+
+def test_a_link_lost_while_overridden_commands_nothing():
+    """The person or failsafe that took over keeps the vehicle through a silence: no on_breach mode is asked for."""
+    from executive.helm import HelmState, step
+    from executive.state import VehicleState
+
+    config = HelmConfig(on_breach="surface")
+    helm = HelmState(phase=Phase.OVERRIDDEN, overridden="the autopilot's mode became MANUAL (from GUIDED), not asked for",
+                     seen_mode=int(SubMode.MANUAL), seen_armed=True)
+    events = []
+    for t in range(40, 100, 2):
+        tick = step(helm, VehicleState(time_s=float(t), mode=int(SubMode.MANUAL), armed=True), None, config,
+                    now_s=float(t), link_ok=False)
+        assert tick.commands == () and tick.helm.phase is Phase.OVERRIDDEN
+        helm, events = tick.helm, events + [e.text for e in tick.events]
+    assert [e.split(":")[0] for e in events] == ["link lost while overridden"]
+    back = step(helm, VehicleState(time_s=101.0, mode=int(SubMode.MANUAL), armed=True, heartbeat_s=101.0), None, config,
+                now_s=101.0, link_ok=True)
+    assert back.helm.phase is Phase.OVERRIDDEN and back.commands == () and not back.helm.silent
+    assert [e.text.split(";")[0] for e in back.events] == ["link regained"]
