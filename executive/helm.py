@@ -256,6 +256,9 @@ def step(
         if helm.phase is Phase.SETUP:
             return Tick(helm, tuple(out.commands), tuple(out.events))
     if not vehicle.has_position:
+        if helm.phase is Phase.SAFE and BREACH_MODE[config.on_breach] is SubMode.SURFACE:  # a stop surfaces blind
+            helm, _ = _choose(helm, vehicle, table, config, now_s, out)
+            helm = _realise(helm, vehicle, config, now_s, out)
         return Tick(helm, tuple(out.commands), tuple(out.events))
     lat, lon, depth = _position(vehicle)
     helm, changed = _choose(helm, vehicle, table, config, now_s, out)
@@ -423,6 +426,9 @@ def _rates(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: fl
 def _setup(
     helm: HelmState, vehicle: VehicleState, table: PolicyTable | None, config: HelmConfig, now_s: float, out: _Out
 ) -> HelmState:
+    if helm.stop is not None and BREACH_MODE[config.on_breach] is SubMode.SURFACE:
+        # Surfacing needs no position: an autopilot that rebooted underwater during a stop has no GPS to find.
+        return replace(helm, phase=Phase.SAFE, activity=None)
     helm = _await_position(helm, vehicle, config, now_s, out)
     if helm.waiting is not None:
         return helm

@@ -211,3 +211,19 @@ def test_a_link_lost_while_overridden_commands_nothing():
                 now_s=101.0, link_ok=True)
     assert back.helm.phase is Phase.OVERRIDDEN and back.commands == () and not back.helm.silent
     assert [e.text.split(";")[0] for e in back.events] == ["link regained"]
+
+
+def test_a_safety_stop_surfaces_without_a_position_after_a_reboot_underwater():
+    """After a reboot the EKF has no position (no GPS under water); SURFACE needs none, so the stop asks for it at once."""
+    from executive.helm import HelmState, rebooted, step
+    from executive.state import SetMode, VehicleState
+
+    helm = rebooted(HelmState(phase=Phase.SAFE, stop=Situation.TOO_DEEP))
+    vehicle = VehicleState(time_s=3.0, mode=int(SubMode.MANUAL), armed=False, heartbeat_s=3.0, ekf_reported=True,
+                           depth_m=40.0)
+    tick = step(helm, vehicle, None, HelmConfig(on_breach="surface"), now_s=3.0, link_ok=True)
+    assert tick.helm.phase is Phase.SAFE and SetMode(SubMode.SURFACE) in tick.commands
+    assert any("safety stop (too_deep) holds" in e.text for e in tick.events)
+    # With on_breach hold the stop needs a position to hold: it waits for the EKF's.
+    held = step(helm, vehicle, None, HelmConfig(on_breach="hold"), now_s=3.0, link_ok=True)
+    assert held.helm.phase is Phase.SETUP and not [c for c in held.commands if isinstance(c, SetMode)]
