@@ -44,6 +44,8 @@ CUT_LINK_LOSS_TIMEOUT_S = 3.0
 MISSION_LINK_LOSS_TIMEOUT_S = 120.0
 SIM_HEARTBEAT_TIMEOUT_S = 5.0  # the simulator's GCS heartbeat failsafe (ArduSub's FS_GCS_TIMEOUT default)
 MAV_STATE_CRITICAL = 5
+# SURFACE, or ALT_HOLD once at the surface: ArduSub completes SURFACE by itself (SURFACE_COMPLETE).
+SURFACED = (SubMode.SURFACE, SubMode.ALT_HOLD)
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
 # Spikes: 150-450 s apart, 20 s long, every datagram held 2 s more (vehicle time).
@@ -154,7 +156,7 @@ def test_the_mission_reaches_its_goal_through_a_faulty_link(demo_plan, synthetic
     failsafe_s, slack_s = (0.0, 2.5) if lossy else (SIM_HEARTBEAT_TIMEOUT_S, FAILSAFE_SLACK_S)
     sim = Sim(synthetic_forecast, (lon, lat), "--heading-deg", "90", "--position-delay-s", "10",
               "--speedup", f"{MISSION_SPEEDUP:g}", "--lockstep-slack-s", f"{slack_s:g}",
-              "--heartbeat-timeout-s", f"{failsafe_s:g}", track=track)
+              "--heartbeat-timeout-s", f"{failsafe_s:g}", "--gcs-sysid", "1", track=track)
     proxy = ex = None
     try:
         proxy = LinkFaultProxy(sim.port, speedup=MISSION_SPEEDUP, seed=5, up=up, down=down)
@@ -199,8 +201,9 @@ def _start_rig(demo_plan, synthetic_forecast, log, link_loss_timeout_s=LINK_LOSS
     """Simulator, proxy and executive at ``FAILSAFE_SPEEDUP``, following the plan; stopped by ``_stop_rig``."""
     lon, lat = start_west_of_goal(demo_plan.table, cells=6)
     # A later --speedup overrides Sim's own (argparse keeps the last).
+    # The simulator's GCS failsafe counts the executive's heartbeats (MAV_GCS_SYSID 1: system 1).
     sim = Sim(synthetic_forecast, (lon, lat), "--position-delay-s", "5", "--speedup", f"{FAILSAFE_SPEEDUP:g}",
-              "--heartbeat-timeout-s", f"{SIM_HEARTBEAT_TIMEOUT_S:g}")
+              "--heartbeat-timeout-s", f"{SIM_HEARTBEAT_TIMEOUT_S:g}", "--gcs-sysid", "1")
     proxy = ex = None
     try:
         proxy = LinkFaultProxy(sim.port, speedup=FAILSAFE_SPEEDUP, seed=11)
@@ -286,7 +289,7 @@ def test_the_failsafe_fires_beyond_the_link_loss_timeout(demo_plan, synthetic_fo
         t0 = proxy.vehicle_s()
         proxy.cut(up=both, down=True)
         assert wait_until(lambda: ex.executive.helm.phase is Phase.LINK_LOST, 20), ex.executive.helm.phase
-        assert wait_until(lambda: proxy.mode() == SubMode.SURFACE, 20), proxy.modes[-3:]
+        assert wait_until(lambda: proxy.mode() in SURFACED, 20), proxy.modes[-3:]
         # A SURFACE request again (every retry_s of the executive's clock: real time through the silence).
         assert wait_until(lambda: sum(m == SubMode.SURFACE for t, m in proxy.mode_requests if t >= t0) >= 2, 20)
         proxy.cut(up=False, down=False)
@@ -298,7 +301,7 @@ def test_the_failsafe_fires_beyond_the_link_loss_timeout(demo_plan, synthetic_fo
     last_vehicle_hb = max(t for t, _ in proxy.modes if t < t0)
     last_exec_hb = max(t for t, _ in proxy.exec_status if t < t0)
     surface_requests = [t - last_vehicle_hb for t, m in proxy.mode_requests if t0 <= t <= t1 and m == SubMode.SURFACE]
-    surfaced = next(t for t, m in proxy.modes if t >= t0 and m == SubMode.SURFACE)
+    surfaced = next(t for t, m in proxy.modes if t >= t0 and m in SURFACED)
     lost_texts = [t - last_exec_hb for t, text in proxy.texts if t >= t0 and "heartbeat lost" in text]
     # The executive waited for the timeout on its own clock, extrapolated through the silence
     # (after its grace, at real time: executive.clock), one step after the last heartbeat it heard.
