@@ -21,6 +21,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from executive.signing import Streams, Verdict, is_signed, timestamp_at
+from planner.contract.errors import ExecutiveError
 from executive.state import (
     Arm,
     Command,
@@ -77,8 +78,16 @@ def open_link(address: str, *, source_system: int, source_component: int,
     elif kind in ("tcp", "tcpin"):
         conn = _tcp_link_classes()[kind == "tcpin"](rest, source_system=source_system,
                                                      source_component=source_component)
-    else:
-        conn = mavutil.mavlink_connection(address, source_system=source_system, source_component=source_component)
+    else:  # a serial device, DEVICE or DEVICE,BAUD (ArduPilot's SERIALn_BAUD: 115200 unless set)
+        device, _, baud = address.partition(",")
+        if baud and not baud.isdigit():
+            raise ExecutiveError(f"--link {address!r}: expected a serial DEVICE,BAUD with a whole baud rate"
+                                 " (e.g. /dev/ttyAMA0,921600), or udpin:/udpout:/tcp:/tcpin: HOST:PORT")
+        try:
+            conn = mavutil.mavlink_connection(device, baud=int(baud or SERIAL_BAUD), source_system=source_system,
+                                              source_component=source_component)
+        except OSError as exc:  # pyserial's SerialException is one: no such device, no permission
+            raise ExecutiveError(f"--link {address!r}: cannot open the serial device: {exc}") from None
     conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
     conn.mav.robust_parsing = True
     conn.WIRE_PROTOCOL_VERSION = mavlink.WIRE_PROTOCOL_VERSION
@@ -163,6 +172,7 @@ _UDP_LINK: type | None = None
 # ``recv()`` reads what its parser says the next frame needs, 8 bytes at a time between frames: at
 # ArduSub SITL's 91 messages per vehicle second at 57x, that reader fell 24 vehicle seconds behind.
 STREAM_READ_BYTES = 65536
+SERIAL_BAUD = 115200  # ArduPilot's default SERIALn_BAUD for a MAVLink port
 
 
 def _tcp_link_classes() -> tuple[type, type]:

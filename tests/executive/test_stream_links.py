@@ -127,3 +127,62 @@ def test_a_listening_tcp_link_takes_the_next_client_after_a_close(tmp_path: Path
     messages = [m for _, m in _logs(log)]
     assert sum(m.startswith("autopilot link closed by the other end") for m in messages) == 2, messages
     assert any(m.startswith("link regained") for m in messages), messages
+
+
+def test_a_serial_link_is_read_in_whole_buffers(tmp_path: Path):
+    """A companion computer's serial port to the autopilot (``DEVICE,BAUD``), here a pseudo-terminal: a minute of
+    ArduSub's default telemetry written at once is read in whole buffers and every frame parsed."""
+    import termios
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    run = None
+    try:
+        ex = Executive(ExecConfig(link=f"{os.ttyname(slave)},921600", log_path=tmp_path / "s.mcap"), None)
+        counting = ex.conn.port = CountingPort(ex.conn.port)
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        sent = list(frames(mav, 50_000, 60.0))
+        run = Running(ex)
+        for _, frame in sent:
+            os.write(master, frame)
+        termios.tcdrain(master)
+        last_s = sent[-1][0] / 1000.0
+        assert wait_until(lambda: ex.clock.last_s == last_s and ex._counts["in"] == len(sent), 30), \
+            (ex.clock.last_s, ex._counts["in"], len(sent))
+    finally:
+        if run is not None:
+            run.stop()
+        os.close(master)
+        os.close(slave)
+    assert ex._counts["bad"] == 0
+    assert counting.calls < len(sent) // 4, counting.calls  # pymavlink's own recv() reads one frame's bytes a call
+
+
+class CountingPort:
+    """The executive's real serial port (pyserial), counting the reads that returned data."""
+
+    def __init__(self, port: object) -> None:
+        self._port = port
+        self.calls = 0
+
+    def read(self, n: int = 1) -> bytes:
+        data = self._port.read(n)  # type: ignore[attr-defined]
+        self.calls += bool(data)
+        return data
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._port, name)
+
+
+def test_a_bad_serial_link_is_one_clear_line(demo_plan, tmp_path: Path, capsys):
+    from planner.cli import main as lrauv
+
+    table = str(demo_plan.table.save(tmp_path / "t.lrpt"))
+    assert lrauv(["exec", "--table", table, "--link", "/dev/no-such-autopilot,57600", "--log", str(tmp_path / "x.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lrauv: error: --link '/dev/no-such-autopilot,57600': cannot open the serial device") and \
+        len(err.splitlines()) == 1, err
+    assert lrauv(["exec", "--table", table, "--link", "/dev/ttyS0,fast", "--log", str(tmp_path / "y.mcap")]) == 2
+    assert "expected a serial DEVICE,BAUD with a whole baud rate" in capsys.readouterr().err
