@@ -47,7 +47,7 @@ def check_goals(goals: Sequence[MissionGoal], envelope: Envelope, table: PolicyT
             if table.lookup(mg.goal.lat_deg, mg.goal.lon_deg, mg.goal.depth_m, 0.0).reason == "outside_grid":
                 reason = "it is outside the forecast's grid (the table in use)"
         if reason is not None:
-            return f"goal {n} ({mg.goal.lat_deg:.6f}, {mg.goal.lon_deg:.6f}, {mg.goal.depth_m:g} m): {reason}"
+            return f"goal {n} ({mg.goal.lon_deg:.6f}, {mg.goal.lat_deg:.6f}, {mg.goal.depth_m:g} m): {reason}"
     return None
 
 

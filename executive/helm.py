@@ -503,7 +503,7 @@ def _safety(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s: f
         return Situation.TOO_DEEP, f"depth {vehicle.depth_m:.1f} m exceeds max_depth_m {config.max_depth_m:g}"
     if (config.geofence is not None and vehicle.lat_deg is not None and vehicle.lon_deg is not None
             and not inside(vehicle.lon_deg, vehicle.lat_deg, config.geofence)):
-        return Situation.GEOFENCE, f"position {vehicle.lat_deg:.5f}, {vehicle.lon_deg:.5f} is outside the geofence"
+        return Situation.GEOFENCE, f"position {vehicle.lon_deg:.5f}, {vehicle.lat_deg:.5f} (lon, lat) is outside the geofence"
     return None
 
 
@@ -585,7 +585,7 @@ def _choose(
         return _switch(helm, current, new, out, f"goal reached: {config.on_arrival}")
     if look.reason == "outside_grid":
         new = Activity(situation=Situation.OUTSIDE_GRID, action=None, cell=None, mode=SubMode.SURFACE, target=None, started_s=now_s)
-        return _switch(helm, current, new, out, f"outside the planned grid at {lat:.5f}, {lon:.5f}, {depth:.1f} m: surfacing")
+        return _switch(helm, current, new, out, f"outside the planned grid at {lon:.5f}, {lat:.5f}, {depth:.1f} m (lon, lat, depth): surfacing")
     if look.reason == "land":
         new = Activity(situation=Situation.LAND, action=None, cell=look.state, mode=SubMode.SURFACE, target=None, started_s=now_s)
         return _switch(helm, current, new, out, f"position in a land cell {look.state}: surfacing")

@@ -109,7 +109,7 @@ def _position(gate: Gate, before: VehicleState, v: VehicleState, t: float, limit
     assert lat is not None and lon is not None  # GLOBAL_POSITION_INT always carries both
     reason = None
     if not (math.isfinite(lat) and math.isfinite(lon)) or abs(lat) > 90.0 or abs(lon) > 180.0:
-        reason = f"position {lat}, {lon} is not a position"
+        reason = f"position (lon, lat) {lon}, {lat} is not a position"
     elif lat == 0.0 and lon == 0.0:
         reason = "position 0, 0: no fix"
     elif not v.position_ok:

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from importlib import import_module
 from typing import Any
 
+from planner.cli.help_text import describe
 from planner.contract.arguments import CommandParser
 from planner.contract.errors import LrauvError
 
@@ -67,6 +68,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
             import_module(c.module).add_parser(sub)
         else:
             sub.add_parser(c.name, help=c.help)
+    describe(sub)
     return parser
 
 

@@ -17,7 +17,7 @@ from typing import Any
 
 from planner.cli.cluster_options import add_cluster_arguments
 from planner.contract.arguments import Subcommands, floats
-from planner.contract.errors import LrauvError
+from planner.contract.errors import GoalError, LrauvError
 
 COST_NAMES = ("drift", "forward", "rotate", "glide")
 
@@ -102,7 +102,12 @@ def run(args: argparse.Namespace) -> int:
     if progress:
         how = f"physical, {settings.criterion}" if settings.model == "physical" else f"{settings.criterion}, {settings.uncertainty}"
         print(f"planning on {request.forecast_path} ({how})", file=sys.stderr)
-    result = plan_with_scheduler(request, scheduler=args.scheduler, workers=args.workers, progress=progress)
+    try:
+        result = plan_with_scheduler(request, scheduler=args.scheduler, workers=args.workers, progress=progress)
+    except GoalError as exc:  # a goal from the mission: name its file and line
+        if mission is None or args.goal is not None:
+            raise
+        raise GoalError(f"{mission.goals[0].where}: {exc}") from None
     data = result.table.to_bytes(compress=not args.no_compress)
     write_atomic(out, data)
     for line in summary_lines(result, out=out, size=len(data)):
@@ -254,10 +259,13 @@ def start_line(result: Any, given: list[float], start: tuple[int, int, int, int]
 
 def start_state(result: Any, start: list[float]) -> tuple[int, int, int, int]:
     """The state (l, j, i, k) of ``--start LON,LAT,DEPTH,HEADING_DEG``; off the grid or on land raises LrauvError."""
+    from planner.contract.geodesy import swap_hint
+
     lon, lat, depth, heading = start
     cell = result.table.locate(lat, lon, depth)
     if cell is None:
-        raise LrauvError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is outside the planning grid")
+        swapped = swap_hint(lon, lat, fits=lambda x, y: result.table.locate(y, x, depth) is not None)
+        raise LrauvError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is outside the planning grid{swapped}")
     l, j, i = cell
     if not result.model.water[l, j, i]:
         raise LrauvError(f"--start: ({lon:g}, {lat:g}, {depth:g} m) is on land")

@@ -6,6 +6,7 @@ Standard library and numpy only: shore, vehicle and simulator share these figure
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,3 +38,19 @@ class BBox:
         if not (-90.0 <= self.south_deg and self.north_deg <= 90.0):
             raise GridError(f"bbox: latitudes must lie in [-90, 90]; got {self.south_deg}..{self.north_deg}")
 
+
+
+def swap_hint(lon_deg: float, lat_deg: float, *, fits: Callable[[float, float], bool] | None = None) -> str:
+    """``"; did you mean LAT,LON (lon,lat)?"`` when the pair reads better swapped, else ``""``.
+
+    Better swapped: out of range as given ([-180, 180], [-90, 90]) but in range the other way round,
+    or, with ``fits(lon, lat)`` (inside a grid, say), not fitting as given but fitting swapped.
+    """
+    def in_range(lon: float, lat: float) -> bool:
+        return math.isfinite(lon) and math.isfinite(lat) and -180 <= lon <= 180 and -90 <= lat <= 90
+
+    if not in_range(lat_deg, lon_deg):
+        return ""
+    if in_range(lon_deg, lat_deg) and (fits is None or fits(lon_deg, lat_deg) or not fits(lat_deg, lon_deg)):
+        return ""
+    return f"; did you mean {lat_deg:g},{lon_deg:g} (lon,lat)?"

@@ -17,7 +17,7 @@ from typing import Any
 import yaml
 
 from planner.contract.errors import LrauvError, MissionError
-from planner.contract.geodesy import BBox
+from planner.contract.geodesy import BBox, swap_hint
 from planner.contract.settings import (
     BREACH_ACTION_OPTIONS,
     CRITERIA,
@@ -124,6 +124,8 @@ class Vehicle:
 class MissionGoal:
     goal: Goal
     on_arrival: OnArrival = "hold"
+    # "missions/x.yaml:31 goals[0]", for errors found later (a goal on land); "" when uploaded; not part of equality
+    where: str = field(default="", compare=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -432,13 +434,14 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         lon = g.number("lon_deg", unit="degrees")
         depth = g.number("depth_m", unit="m", minimum=0)
         if not -90 <= lat <= 90:
-            raise doc.error(g.path("lat_deg"), f"expected a latitude in [-90, 90]; got {lat:g}")
+            raise doc.error(g.path("lat_deg"), f"expected a latitude in [-90, 90]; got {lat:g}{swap_hint(lon, lat)}")
         if depth > deepest + 1e-9:
             raise doc.error(g.path("depth_m"), f"{depth:g} m is deeper than the deepest layer {deepest:g} m")
         goals.append(
             MissionGoal(
                 goal=Goal(lon_deg=lon, lat_deg=lat, depth_m=depth, radius_cells=g.integer("radius_cells", 1, minimum=0)),
                 on_arrival=g.choice("on_arrival", ON_ARRIVAL_OPTIONS, "hold"),
+                where=f"{doc.path}:{doc.lines[g.key]} {g.key}",
             )
         )
 
@@ -549,6 +552,10 @@ def items_to_goals(items: Sequence[MissionItem]) -> tuple[MissionGoal, ...]:
             raise WaypointError(f"item {item.seq}: out of sequence; expected seq {n}", MissionResult.INVALID_SEQUENCE)
         if item.mission_type != 0:
             raise WaypointError(f"item {n}: mission_type {item.mission_type} is not a mission (0)", MissionResult.UNSUPPORTED)
+    if not items:  # MISSION_CLEAR_ALL or a count of 0 (MAVProxy's `wp clear`): there is no goal-less plan to fly
+        raise WaypointError("clearing the goals is not supported: the vehicle keeps its current goals; to change them "
+                            "upload a new mission (`wp load FILE`, `lrauv upload`); to stop, change the autopilot's mode "
+                            "(the executive then stands aside)", MissionResult.UNSUPPORTED)
     if len(items) < 2:
         raise WaypointError("no goals: expected home (item 0) and at least one goal item", MissionResult.INVALID)
     if len(items) - 1 > MAX_GOALS:

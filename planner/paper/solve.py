@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from planner.contract.actions import Action
 from planner.contract.errors import GoalError, GridError
+from planner.contract.geodesy import swap_hint
 from planner.grid import Grid
 from planner.contract.headings import DI, DJ, N_HEADINGS
 from planner.contract.settings import Goal
@@ -142,6 +143,7 @@ def goal_cells_on(grid: Grid, water: NDArray[np.bool_], goal: Goal) -> GoalCells
             f"{where} lies {outside:.2f} cells outside the planning grid "
             f"(lon {b.west_deg:.5f}..{b.east_deg:.5f}, lat {b.south_deg:.5f}..{b.north_deg:.5f}); "
             "expected at most half a cell outside"
+            + swap_hint(goal.lon_deg, goal.lat_deg, fits=lambda lon, lat: grid.nearest_cell(lon, lat)[2] <= 0.5)
         )
     if goal.depth_m < 0 or goal.depth_m > grid.depth_m[-1] + 0.5 * (
         grid.depth_m[-1] - grid.depth_m[-2] if grid.n_layers > 1 else 0.0

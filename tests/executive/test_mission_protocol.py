@@ -166,6 +166,15 @@ def test_count_zero_and_clear_all_ask_accept_with_nothing():
     assert out == (StatusText("mission refused: cannot clear while executing"), Ack(GCS, MissionResult.ERROR))
 
 
+def test_wp_clear_is_refused_saying_what_happened_and_what_to_do():
+    rx = MissionReceiver(Judge(), items=ITEMS)  # the executive's hook: goals as items_to_goals reads them
+    out = rx.on_clear_all(GCS, 0, 0.0)
+    text = "".join(o.text for o in out if isinstance(o, StatusText))
+    assert text.startswith("mission refused: clearing the goals is not supported: the vehicle keeps its current goals")
+    assert "upload a new mission" in text and "to stop, change the autopilot's mode" in text
+    assert out[-1] == Ack(GCS, MissionResult.UNSUPPORTED) and rx.items == ITEMS
+
+
 def test_refusals_keep_the_old_list_and_carry_a_result():
     rx = MissionReceiver(Judge("not today"), items=ITEMS[:2])
     out = _upload(rx, ITEMS)

@@ -290,7 +290,7 @@ def format_summary(s: DiveSummary) -> str:
     if s.deviation is not None:
         d = s.deviation
         lines.append(f"deviation  largest from the nominal path {d.distance_m:.0f} m at {d.time_s:.1f} s"
-                     f" ({d.lat_deg:.5f}, {d.lon_deg:.5f}), plan segment {d.segment}")
+                     f" (lon, lat {d.lon_deg:.5f}, {d.lat_deg:.5f}), plan segment {d.segment}")
     else:
         lines.append(f"deviation  unknown: {s.deviation_note}")
     return "\n".join(lines)

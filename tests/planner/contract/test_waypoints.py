@@ -120,8 +120,9 @@ def test_items_to_goals_needs_one_to_max_goals_goals():
     with pytest.raises(WaypointError, match="no goals") as info:
         items_to_goals(items[:1])
     assert info.value.result == MissionResult.INVALID
-    with pytest.raises(WaypointError, match="no goals"):
-        items_to_goals(())
+    with pytest.raises(WaypointError, match="clearing the goals is not supported") as info:
+        items_to_goals(())  # MISSION_CLEAR_ALL
+    assert info.value.result == MissionResult.UNSUPPORTED
     many = goals_to_items([GOALS[0]] * (MAX_GOALS + 1), **HOME)
     with pytest.raises(WaypointError, match=f"{MAX_GOALS + 1} goals: expected at most {MAX_GOALS}") as info:
         items_to_goals(many)
