@@ -28,7 +28,10 @@ from planner.forecast.error import ErrorEstimate, measure_error
 from planner.forecast.resample import resample
 from planner.grid import Grid
 from planner.contract.geodesy import BBox
+from planner.compile_note import COMPILING, needs_compile
+from planner.contract.progress import SILENT, Progress
 from planner.contract.settings import Goal, PlanSettings
+from planner.paper.solve import ENTRY_KERNEL as SEARCH_KERNEL
 from planner.paper.solve import Solution, goal_cells_on, solve
 from planner.contract.table import PolicyTable
 from planner.paper.transitions import TransitionModel, build_transitions
@@ -43,6 +46,7 @@ from planner.physical.model import (
     sample_transitions,
 )
 from planner.physical.horizon import HorizonSolution, solve_horizon
+from planner.physical.sampling import ENTRY_KERNEL as SAMPLING_KERNEL
 from planner.physical.solve import PhysicalSolution, solve_physical
 
 if TYPE_CHECKING:
@@ -284,13 +288,14 @@ def _goal_mask(grid: Grid, u: NDArray[np.float64], v: NDArray[np.float64], goal:
 
 
 def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progress: bool = False,
-              runner: Runner | None = None, samples: SampleCache | None = None) -> PlanResult:
+              runner: Runner | None = None, samples: SampleCache | None = None, meter: Progress = SILENT) -> PlanResult:
     """Run the whole pipeline. Raises a PlannerError subclass on bad input.
 
     Several forecast members (``request.ensemble``, a member dimension, ``request.members``)
     are outcomes of the physical model: each member is sampled as a task of ``runner``
     (default: here), and their samples together make the transitions (docs/scale-out.md).
     ``samples`` keeps one forecast's goal-free samples for the next goal planned on it.
+    ``meter`` hears sampling and solving (``planner.contract.progress``) and a first run's compile.
     """
     timings: dict[str, float] = {}
     t = time.perf_counter()
@@ -298,14 +303,14 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         request = replace(request, goal=replace(request.goal, lon_deg=request.goal.lon_deg - 360.0))
     refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
     if len(refs) > 1:
-        return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress)
+        return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress, meter=meter)
     steps_needed = request.settings.time_varying or (request.settings.error_measured and request.settings.model == "physical")
     if forecast is None and steps_needed:  # every step: the slices, or the change to measure
         forecast = open_forecast(refs[0].path, variables=request.variables, grid_file=request.grid_file,
                                  member=refs[0].member, bbox=request.bbox)
     if request.settings.time_varying:
         assert forecast is not None
-        return _plan_horizon(request, forecast, choose_time_index(forecast, request), timings, t, progress)
+        return _plan_horizon(request, forecast, choose_time_index(forecast, request), timings, t, progress, meter)
     if forecast is None:
         forecast, index = open_step(request, refs[0])
     else:
@@ -333,7 +338,8 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
                request.settings.physical, request.settings.vehicle)
         stats = samples.get(key) if samples is not None else None
         if stats is None:
-            stats = sample_transitions(uf, vf, grid, request.settings, refine=refine)
+            _announce_compile(meter, SAMPLING_KERNEL)
+            stats = sample_transitions(uf, vf, grid, request.settings, refine=refine, meter=meter)
             if samples is not None:
                 samples.put(key, stats)
         timings["sampling_s"] = time.perf_counter() - t
@@ -342,7 +348,7 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         timings["transitions_s"] = time.perf_counter() - t
         _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each, "
                         f"currents {refine}x finer than the grid")
-        solution = solve_physical(model, request.goal)
+        solution = solve_physical(model, request.goal, meter=meter)
         timings["plan_s"] = time.perf_counter() - t
     else:
         t = time.perf_counter()
@@ -350,7 +356,8 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
         timings["resample_s"] = time.perf_counter() - t
         t = time.perf_counter()
         model = build_transitions(u, v, grid, request.settings)
-        solution = solve(model, request.goal, progress=progress)
+        _announce_compile(meter, SEARCH_KERNEL)
+        solution = solve(model, request.goal, progress=progress, meter=meter)
         timings["plan_s"] = time.perf_counter() - t
     table = PolicyTable.from_solution(
         solution,
@@ -403,7 +410,7 @@ def slice_steps(forecast: Forecast, index: int, horizon_h: float, slice_h: float
 
 
 def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings: dict[str, float], t: float,
-                  progress: bool) -> PlanResult:
+                  progress: bool, meter: Progress) -> PlanResult:
     """A time-varying physical plan (``planner.physical.horizon``): a slice per forecast step."""
     if forecast.time_origin is None:
         raise ForecastError(f"{forecast.source}: a time-varying plan needs dated forecast steps (its table is looked up "
@@ -424,11 +431,18 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states, "
                     f"{len(steps)} time slices over {(forecast.time_s[steps[-1]] - forecast.time_s[steps[0]]) / 3600:g} h")
 
+    sampled = [0]  # slices sampled so far, whatever order the solver asks for them in
+
     def model_at(n: int) -> PhysicalModel:
         uf, vf = (uf0, vf0) if n == 0 else resample(forecast, fine, time_index=forecast.step_index(steps[n]))
         stats = sample_transitions(uf, vf, grid, settings, refine=refine)
         stats = enter_goal(stats, uf, vf, grid, settings, refine=refine, goal_mask=goal_mask)
+        sampled[0] = min(sampled[0] + 1, len(steps))
+        meter.update("time slices", sampled[0], len(steps), unit="slices")
         return assemble(stats, grid, settings, refine=refine)
+
+    _announce_compile(meter, SAMPLING_KERNEL)
+    meter.update("time slices", 0, len(steps), unit="slices")
 
     t = time.perf_counter()
     times = np.array([forecast.time_s[n] - forecast.time_s[steps[0]] for n in steps], dtype=np.float64)
@@ -448,7 +462,8 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
 
 
 def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, workers: int | None = None,
-                        progress: bool = False, samples: SampleCache | None = None) -> PlanResult:
+                        progress: bool = False, samples: SampleCache | None = None,
+                        meter: Progress = SILENT) -> PlanResult:
     """``make_plan``, several forecast members sampled where ``scheduler`` says (``planner.cluster.open_runner``).
 
     One member plans here without a runner; the file headers are read once, here.
@@ -458,13 +473,14 @@ def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, w
     if len(refs) > 1 and request.settings.time_varying:
         raise PlannerError(f"a time-varying plan takes one forecast (its steps are the slices); got {len(refs)} members")
     if len(refs) == 1:
-        return make_plan(request, progress=progress, samples=samples)
+        return make_plan(request, progress=progress, samples=samples, meter=meter)
     with open_runner(scheduler, workers=workers) as runner:
         _note(progress, f"{len(refs)} forecast members, sampled: {runner.describe()}")
-        return make_plan(request, progress=progress, runner=runner)
+        return make_plan(request, progress=progress, runner=runner, meter=meter)
 
 
-def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runner, progress: bool) -> PlanResult:
+def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runner, progress: bool,
+                   meter: Progress) -> PlanResult:
     if request.settings.model != "physical":
         raise PlannerError(f"an ensemble of {len(refs)} forecast members needs the physical model (members are its "
                            f"outcomes; the paper model has none): give --model physical or one forecast")
@@ -478,12 +494,15 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states; "
                     f"{len(refs)} forecast members")
     t = time.perf_counter()
+    _announce_compile(meter, SAMPLING_KERNEL)
+    meter.update("sampling members", 0, len(tasks), unit="members")
     stats = runner.map(sample_member, tasks)
+    meter.update("sampling members", len(tasks), len(tasks), unit="members")
     timings["transitions_s"] = time.perf_counter() - t
     model = assemble(combine(stats), grid, request.settings, refine=tasks[0].refine)
     _note(progress, f"physical model: {model.n_pairs:,} state-actions, {model.samples_per_action} samples each "
                     f"from {model.members} members")
-    solution = solve_physical(model, request.goal)
+    solution = solve_physical(model, request.goal, meter=meter)
     timings["plan_s"] = time.perf_counter() - t
     files = {refs[0].path: first.identity}  # each file hashed once, however many members it holds
     for r in refs:
@@ -526,6 +545,11 @@ def mission_forecast(mission: Mission, *, cache_dir: Path | None = None) -> Path
     if not path.exists():
         write_synthetic(path, SyntheticSettings(seed=src.synthetic_seed, hours=src.synthetic_hours))
     return path
+
+
+def _announce_compile(meter: Progress, kernel: object) -> None:
+    if needs_compile(kernel):
+        meter.note(COMPILING)
 
 
 def _note(progress: bool, text: str) -> None:

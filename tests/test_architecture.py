@@ -20,7 +20,7 @@ PACKAGES = ("planner", "executive", "vehicle_sim")
 MAX_MODULE_LINES = 800
 # The bottom layer's whole world: the standard library and these.
 CONTRACT_THIRD_PARTY = frozenset({"numpy", "yaml"})
-HEAVY = ("xarray", "scipy", "numba", "netCDF4", "pyproj", "matplotlib")
+HEAVY = ("xarray", "scipy", "numba", "netCDF4", "pyproj", "matplotlib", "tqdm")
 
 
 @dataclass(frozen=True)

@@ -87,6 +87,7 @@ def add_parser(sub: Subcommands) -> None:
 def run(args: argparse.Namespace) -> int:
     from planner.contract.atomic import write_atomic
     from planner.contract.mission import load_mission
+    from planner.cli.progress_bar import bars
     from planner.pipeline import plan_with_scheduler
     from planner.plan_summary import summary_lines, time_line
     from planner.plan_values import check_suffix, export_values
@@ -103,7 +104,9 @@ def run(args: argparse.Namespace) -> int:
         how = f"physical, {settings.criterion}" if settings.model == "physical" else f"{settings.criterion}, {settings.uncertainty}"
         print(f"planning on {request.forecast_path} ({how})", file=sys.stderr)
     try:
-        result = plan_with_scheduler(request, scheduler=args.scheduler, workers=args.workers, progress=progress)
+        with bars(quiet=args.quiet) as meter:
+            result = plan_with_scheduler(request, scheduler=args.scheduler, workers=args.workers, progress=progress,
+                                         meter=meter)
     except GoalError as exc:  # a goal from the mission: name its file and line
         if mission is None or args.goal is not None:
             raise

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from planner.contract.errors import GridError
 from planner.contract.geodesy import EARTH_RADIUS_M
 from planner.contract.headings import N_HEADINGS, courses_deg
+from planner.contract.progress import SILENT, Progress
 from planner.contract.settings import PhysicalSettings, PlanSettings
 from planner.contract.vehicle import power_draw_w
 from planner.grid import Grid
@@ -191,9 +192,11 @@ def _kernel(u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], gr
 
 def sample_transitions(
     u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], grid: Grid, settings: PlanSettings, *, refine: int,
-    goal_mask: NDArray[np.bool_] | None = None,
+    goal_mask: NDArray[np.bool_] | None = None, meter: Progress = SILENT,
 ) -> SampleStats:
     """Sample every water cell's channels in one forecast member; currents on ``fine_grid(grid, refine)``.
+
+    ``meter`` hears the water cells sampled, block by block (``planner.contract.progress``).
 
     ``goal_mask`` (L, ny, nx): a FORWARD or DRIFT sample that enters a goal cell ends there, when
     it enters, as a vehicle arrives on entering the goal cells (not a cell spacing later). Without
@@ -209,11 +212,13 @@ def sample_transitions(
     tsum = np.zeros((n_cells, n_ch))
     n_out = np.zeros(n_cells * n_ch, dtype=np.int64)
     parts: list[tuple[NDArray, NDArray, NDArray]] = []
+    meter.update("sampling", 0, cells.size, unit="cells")
     for lo in range(0, cells.size, _BLOCK_CELLS):
         block = cells[lo:lo + _BLOCK_CELLS]
         h, es, ts, count, emax = kernel.run(block, no_goal)
         hazard[block], esum[block], tsum[block] = h, es, ts
         parts.append(_compact(block, n_ch, h, count, emax, n_out))
+        meter.update("sampling", lo + block.size, cells.size, unit="cells")
     ptr = np.zeros(n_cells * n_ch + 1, dtype=np.int64)
     np.cumsum(n_out, out=ptr[1:])
     slot = np.concatenate([p[0] for p in parts]) if parts else np.zeros(0, np.int8)
@@ -683,3 +688,6 @@ def _merge(  # pragma: no cover
             e += 1
         ptr[q + 1] = e
     return ptr, slot[:e].copy(), count[:e].copy(), emax[:e].copy()
+
+
+ENTRY_KERNEL = _sample_cells  # the kernel every physical plan runs: its first compile is the slow one

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from planner.contract.actions import Action
 from planner.contract.errors import PlannerError
+from planner.contract.progress import SILENT, Progress
 from planner.physical.expected import solve_expected
 from planner.physical.model import PAIR_ACTIONS, PhysicalModel
 from planner.contract.settings import Goal
@@ -109,12 +110,15 @@ class PhysicalSolution:
         return path
 
 
-def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
-    """Solve ``model`` under its settings' criterion (robust or expected)."""
+def solve_physical(model: PhysicalModel, goal: Goal, *, meter: Progress = SILENT) -> PhysicalSolution:
+    """Solve ``model`` under its settings' criterion (robust or expected).
+
+    ``meter`` hears the start and the end (the compiled solver runs in one call)."""
     goal_cells = goal_cells_on(model.grid, model.water, goal)
     L, ny, nx, K = model.grid.shape
     goal_states = np.flatnonzero(np.broadcast_to(goal_cells.mask[None], (K, L, ny, nx)).ravel())
     t0 = time.perf_counter()
+    meter.update("solving", 0, model.n_states, unit="states")
     iterations, sweeps, residual = 0, 0, 0.0
     if model.settings.criterion == "robust":
         value, tgo, pair = _robust(model.ptr, model.out_state, model.out_energy_max_wh, model.pair_state,
@@ -134,6 +138,7 @@ def solve_physical(model: PhysicalModel, goal: Goal) -> PhysicalSolution:
     else:
         raise PlannerError(f"criterion: the physical model has robust and expected; got {model.settings.criterion!r}")
     solve_s = time.perf_counter() - t0
+    meter.update("solving", model.n_states, model.n_states, unit="states")
     action[goal_states] = int(Action.AT_GOAL)
     water = np.broadcast_to(model.water[None], (K, L, ny, nx)).ravel()
     value = np.where(water, value, np.inf)
