@@ -22,16 +22,22 @@ def add_parser(sub: Subcommands) -> None:
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="directory for the log, track and pictures")
     p.add_argument("--timeout-s", type=float, default=170.0, help="wall-time limit for the run")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr (drawn only on a terminal)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.cli.progress_bar import announcer, bars
     from planner.shore.demo import draw_track, run_closed_loop
 
     args.out.mkdir(parents=True, exist_ok=True)
-    result = run_closed_loop(
-        table=args.table, mission=args.mission, truth=args.truth, start=args.start, depth_m=args.depth_m,
-        heading_deg=args.heading_deg, speedup=args.speedup, out=args.out, timeout_s=args.timeout_s, seed=args.seed,
-    )
+    with bars(quiet=args.quiet) as meter:
+        announcer(meter, quiet=args.quiet)(f"closed loop: simulator and executive at {args.speedup:g}x, up to"
+                                           f" {args.timeout_s:g} s of wall time")
+        result = run_closed_loop(
+            table=args.table, mission=args.mission, truth=args.truth, start=args.start, depth_m=args.depth_m,
+            heading_deg=args.heading_deg, speedup=args.speedup, out=args.out, timeout_s=args.timeout_s,
+            seed=args.seed, meter=meter,
+        )
     sys.stdout.write(result.exec_output)
     picture = draw_track(args.table, result.track_csv, args.out / "pictures" / "track.png", truth=args.truth)
     print(f"track      {result.track_csv}")

@@ -7,12 +7,12 @@ import csv
 import io
 import json
 import math
-import sys
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 from planner.cli.cluster_options import add_cluster_arguments
+from planner.cli.progress_bar import announcer, bars
 from planner.contract.arguments import Subcommands
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import LrauvError
@@ -79,11 +79,12 @@ def run(args: argparse.Namespace) -> int:
     spec = CampaignSpec(mission=mission, forecast_path=forecast, truth=truth, methods=methods, n_starts=args.starts,
                         seed=args.seed, dt_s=args.dt_s, max_time_s=args.max_hours * 3600.0,
                         replan_s=None if args.replan_h is None else args.replan_h * 3600.0, time_index=args.time_index)
-    note = (lambda _: None) if args.quiet else (lambda text: print(f"  {text}", file=sys.stderr, flush=True))
-    campaign = prepare(spec, note=note)
-    with open_runner(args.scheduler, workers=args.workers) as runner:
-        note(f"{len(campaign.starts)} starts x {len(methods)} methods, {runner.describe()}")
-        campaign = run_all(campaign, runner=runner)
+    with bars(quiet=args.quiet) as meter:
+        note = announcer(meter, quiet=args.quiet)
+        campaign = prepare(spec, note=note, meter=meter)
+        with open_runner(args.scheduler, workers=args.workers) as runner:
+            note(f"{len(campaign.starts)} starts x {len(methods)} methods, {runner.describe()}")
+            campaign = run_all(campaign, runner=runner, meter=meter)
     summaries = summarise(campaign.results, methods)
     resolution = resolution_change(campaign) if args.resolution else None
     print(format_table(summaries))

@@ -9,6 +9,7 @@ settings, and a bad one names its option.
 from __future__ import annotations
 
 import argparse
+import sys
 import dataclasses
 import math
 import pathlib
@@ -150,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
+    which = "the truth" if args.issue is None else f"issue {args.issue}"
+    print(f"  synthesising {args.hours} h of the Southern California Bight forecast ({which})", file=sys.stderr,
+          flush=True)
     path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
     print(f"wrote {path}")
     return 0

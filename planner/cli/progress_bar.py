@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import shutil
 import sys
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import IO, Any, Iterator
+from typing import IO, Any
 
 from planner.contract.progress import SILENT, Progress
 
@@ -22,6 +24,11 @@ class TerminalBars:
         self.stream = stream
         self.task: str | None = None
         self.bar: Any = None
+        self.drawn_s = 0.0
+
+    # Callers may tick on every message of a log (tens of thousands): the bar is drawn at most this often,
+    # and always at a task's start and end.
+    REDRAW_S = 0.1
 
     def update(self, task: str, done: float, total: float, *, unit: str = "", detail: str = "") -> None:
         from tqdm import tqdm
@@ -33,12 +40,15 @@ class TerminalBars:
             size = shutil.get_terminal_size()
             self.bar = tqdm(total=total, desc=task, unit=f" {unit}" if unit else "it", file=self.stream,
                             ncols=min(size.columns, 100), nrows=size.lines, mininterval=0.2)
+        elif done < total and time.monotonic() - self.drawn_s < self.REDRAW_S:
+            return
         bar = self.bar
         bar.total = total
         bar.n = done
         if detail:
             bar.set_postfix_str(detail, refresh=False)
         bar.refresh()
+        self.drawn_s = time.monotonic()
 
     def note(self, text: str) -> None:
         from tqdm import tqdm
@@ -63,3 +73,13 @@ def bars(*, quiet: bool, stream: IO[str] | None = None) -> Iterator[Progress]:
         yield meter
     finally:
         meter.close()
+
+
+def announcer(meter: Progress, *, quiet: bool) -> Callable[[str], None]:
+    """Where a command's one-line notes go: above the bars on a terminal, plain lines on stderr off one
+    (a log keeps them), nowhere with ``--quiet``."""
+    if quiet:
+        return lambda _text: None
+    if meter is not SILENT:
+        return meter.note
+    return lambda text: print(f"  {text}", file=sys.stderr, flush=True)

@@ -40,6 +40,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--mavlink", metavar="ADDRESS",
                    help="re-send the recorded telemetry as MAVLink to this pymavlink address (e.g. udpout:127.0.0.1:14550)")
     p.add_argument("--speed", type=float, default=10.0, help="re-stream speed, times real (vehicle) time (default 10)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars (they are drawn only on a terminal)")
     return p
 
 
@@ -65,6 +66,7 @@ def _replay(args: argparse.Namespace) -> int:
     from planner.shore.replay.audit import audit, logged_tables, summary_line
     from planner.shore.replay.dive import load_dive
     from planner.shore.replay.divelog import open_dive
+    from planner.cli.progress_bar import bars
     from planner.shore.replay.summary import format_summary, summarise
 
     if args.mavlink is not None and not (math.isfinite(args.speed) and args.speed > 0):
@@ -72,8 +74,9 @@ def _replay(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.simplify_m) and args.simplify_m >= 0):
         raise LrauvError(f"--simplify-m: expected metres >= 0; got {args.simplify_m}")
     t0 = time.perf_counter()
-    log = open_dive(args.log)
-    dive = load_dive(log)
+    with bars(quiet=args.quiet) as meter:  # closed before the summary prints on stdout
+        log = open_dive(args.log, meter=meter)
+        dive = load_dive(log, meter=meter)
     if len(dive.track) == 0:
         print(f"log        {log.path}: {log.where_it_ends()}")
         raise LrauvError(f"{log.path}: the log holds no decision: the executive never had a position to act on")
@@ -86,7 +89,8 @@ def _replay(args: argparse.Namespace) -> int:
     verdict = None
     if not args.no_audit:
         try:
-            result = audit(log)
+            with bars(quiet=args.quiet) as meter:
+                result = audit(log, meter=meter)
         except LogError as exc:  # some of the audit's say what is wrong, not in which file
             raise exc if str(log.path) in str(exc) else LogError(f"{log.path}: {exc}") from None
         verdict = summary_line(result)

@@ -10,13 +10,21 @@ where everything is. Both processes are always stopped, also on errors.
 from __future__ import annotations
 
 import csv
+import os
 import subprocess
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from planner.contract.progress import SILENT, Progress
+from planner.contract.table import PolicyTable
+from planner.shore.replay.track_filter import path_length_m
 from vehicle_sim.cli import wait_ready
+
+POLL_S = 0.5  # how often the closed loop's progress is read off the simulator's track file
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,8 +37,12 @@ class DemoResult:
 
 
 def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: str, depth_m: float, heading_deg: float,
-                    speedup: float, out: Path, timeout_s: float, seed: int = 0) -> DemoResult:
-    """Run sim and exec as processes until the executive exits; returns its status and output."""
+                    speedup: float, out: Path, timeout_s: float, seed: int = 0, meter: Progress = SILENT) -> DemoResult:
+    """Run sim and exec as processes until the executive exits; returns its status and output.
+
+    ``meter`` hears the vehicle time (hours) against the run's limit (``timeout_s`` of wall time at
+    ``speedup``), with the distance to the table's goal, read off the simulator's track file as it grows.
+    """
     t0 = time.monotonic()
     lrauv = [sys.executable, "-m", "planner.cli"]
     track = out / "track.csv"
@@ -49,12 +61,71 @@ def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: st
         if mission is not None:
             exec_cmd += ["--mission", str(mission)]
         ex = subprocess.Popen(exec_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        output, _ = ex.communicate(timeout=timeout_s + 30.0)
+        output = wait_watching(ex, timeout_s + 30.0, TrackWatch(track, table, timeout_s * speedup / 3600.0, meter))
         status = ex.returncode
     finally:
         for proc in (ex, sim):
             stop_process(proc)
     return DemoResult(exec_status=status, exec_output=output, track_csv=track, log_path=log, wall_s=time.monotonic() - t0)
+
+
+class TrackWatch:
+    """The simulator's latest track row, as progress: vehicle hours of the limit, km to the goal."""
+
+    def __init__(self, track: Path, table: Path, limit_h: float, meter: Progress) -> None:
+        self.track, self.limit_h, self.meter = track, limit_h, meter
+        self.goal: tuple[float, float] | None = None
+        if meter is not SILENT:
+            t = PolicyTable.load(table)
+            self.goal = (t.goal_lat_deg, t.goal_lon_deg)
+        self.hours = 0.0
+
+    def poll(self) -> None:
+        if self.goal is None:
+            return
+        row = last_track_row(self.track)
+        if row is None:
+            return
+        self.hours = max(self.hours, row["time_s"] / 3600.0)
+        km = path_length_m(np.array([row["lat_deg"], self.goal[0]]), np.array([row["lon_deg"], self.goal[1]])) / 1000
+        self.meter.update("closed loop", min(self.hours, self.limit_h), self.limit_h, unit="h",
+                          detail=f"vehicle {self.hours:.2f} h, {km:.2f} km to the goal")
+
+
+def wait_watching(proc: subprocess.Popen[str], timeout_s: float, watch: TrackWatch) -> str:
+    """``proc``'s output once it exits, polling ``watch`` meanwhile; ``TimeoutExpired`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        try:
+            # communicate() again after its timeout loses no output (Python's subprocess documentation).
+            output, _ = proc.communicate(timeout=min(POLL_S, max(deadline - time.monotonic(), 0.0)))
+        except subprocess.TimeoutExpired:
+            if time.monotonic() >= deadline:
+                raise
+            watch.poll()
+            continue
+        watch.poll()
+        return output
+
+
+def last_track_row(path: Path) -> dict[str, float] | None:
+    """The last complete row of the simulator's track CSV as written so far (it is buffered), or None."""
+    try:
+        with open(path, "rb") as f:
+            header = f.readline().decode().strip().split(",")
+            size = os.fstat(f.fileno()).st_size
+            f.seek(max(size - 4096, 0))
+            lines = f.read().split(b"\n")
+    except OSError:
+        return None
+    for line in reversed(lines[:-1]):  # the text after the last newline may be a row half written
+        values = line.decode(errors="replace").split(",")
+        if len(values) == len(header) and values != header:
+            try:
+                return {k: float(v) for k, v in zip(header, values, strict=True)}
+            except ValueError:
+                continue
+    return None
 
 
 def stop_process(proc: subprocess.Popen[str] | None) -> None:

@@ -23,6 +23,7 @@ import numpy as np
 from planner.contract.actions import Action
 from planner.cluster import InProcess, Runner, chunks
 from planner.contract.errors import ShoreError
+from planner.contract.progress import SILENT, Progress
 from planner.shore.evaluation.runs import (
     DEFAULT_METHODS,
     METHODS,
@@ -138,7 +139,8 @@ def request_for(spec: CampaignSpec, settings: PlanSettings, time_index: int) -> 
                              radius_cells=goal.radius_cells * s))
 
 
-def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], None] = lambda _: None) -> dict[str, MethodPlan]:
+def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], None] = lambda _: None,
+               meter: Progress = SILENT) -> dict[str, MethodPlan]:
     """Plan every method at the first step and, with ``replan_s``, at the steps nearest each replan time."""
     t0 = float(forecast.time_s[spec.time_index])
     times = [0.0]
@@ -167,7 +169,7 @@ def make_plans(spec: CampaignSpec, forecast: Forecast, *, note: Callable[[str], 
             key = (key_model, index)
             if key not in cache:
                 started = time.perf_counter()
-                cache[key] = make_plan(request_for(spec, settings, index), forecast=forecast)
+                cache[key] = make_plan(request_for(spec, settings, index), forecast=forecast, meter=meter)
                 note(f"planned {key_model} at forecast step {index} in {time.perf_counter() - started:.1f} s")
             if not schedule or schedule[-1][1] is not cache[key].table:
                 schedule.append((t, cache[key].table))
@@ -196,14 +198,14 @@ def referee_for(plans: dict[str, MethodPlan], spec: CampaignSpec, forecast: Fore
     return Referee(table=result.table)
 
 
-def prepare(spec: CampaignSpec, *, note: Callable[[str], None] = lambda _: None) -> Campaign:
-    """Plans, referee and start states; no runs yet."""
+def prepare(spec: CampaignSpec, *, note: Callable[[str], None] = lambda _: None, meter: Progress = SILENT) -> Campaign:
+    """Plans, referee and start states; no runs yet. ``meter`` hears each plan's sampling and solving."""
     t = time.perf_counter()
     forecast = open_forecast(spec.forecast_path, variables=spec.mission.forecast.variables,
                              grid_file=spec.mission.forecast.grid_file)
     if not 0 <= spec.time_index < forecast.time_s.size:
         raise ShoreError(f"{spec.forecast_path}: time index {spec.time_index} is out of range (0..{forecast.time_s.size - 1})")
-    plans = make_plans(spec, forecast, note=note)
+    plans = make_plans(spec, forecast, note=note, meter=meter)
     referee = referee_for(plans, spec, forecast)
     offset = time_offset_s(forecast, spec.time_index, spec.truth)
     starts = pick_starts(referee, spec.truth, spec.n_starts, seed=spec.seed, time_offset_s=offset)
@@ -261,18 +263,27 @@ def run_chunk(runs: Sequence[tuple[str, int]], campaign: Campaign) -> list[RunRe
     return [run_one(campaign, m, n) for m, n in runs]
 
 
-def run_all(campaign: Campaign, runs: Iterable[tuple[str, int]] | None = None, *, runner: Runner | None = None) -> Campaign:
+def run_all(campaign: Campaign, runs: Iterable[tuple[str, int]] | None = None, *, runner: Runner | None = None,
+            meter: Progress = SILENT) -> Campaign:
     """Fly the runs, as tasks of ``runner`` (default: here, one after another); results in ``runs`` order.
 
     Each task flies a contiguous piece of the runs; the campaign (plans, truth, starts) goes to
-    every worker once. Runs are deterministic, so any runner gives the same results.
+    every worker once. Runs are deterministic, so any runner gives the same results. ``meter``
+    hears the runs flown: after every run here, after every wave of one piece per worker on a cluster.
     """
     t = time.perf_counter()
     todo = list(all_runs(campaign) if runs is None else runs)
     runner = runner or InProcess()
     pieces = [[todo[i] for i in r] for r in chunks(len(todo), runner.workers)]
-    results = tuple(r for part in runner.map(run_chunk, pieces, campaign=campaign) for r in part)
-    return replace(campaign, results=results, timings_s={**campaign.timings_s, "runs_s": time.perf_counter() - t})
+    if runner.workers == 1:  # nothing to balance: one run a piece, so the meter moves with every run
+        pieces = [[run] for run in todo]
+    results: list[RunResult] = []
+    meter.update("runs", 0, len(todo), unit="runs")
+    for wave in range(0, len(pieces), runner.workers):
+        results.extend(r for part in runner.map(run_chunk, pieces[wave:wave + runner.workers], campaign=campaign)
+                       for r in part)
+        meter.update("runs", len(results), len(todo), unit="runs")
+    return replace(campaign, results=tuple(results), timings_s={**campaign.timings_s, "runs_s": time.perf_counter() - t})
 
 
 def resolution_change(campaign: Campaign, methods: Sequence[str] = ("physical-expected", "physical-robust")

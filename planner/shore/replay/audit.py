@@ -48,6 +48,7 @@ from executive.helm import (
 from executive.recorder import LogError, Topic
 from executive.state import Situation, VehicleState
 from planner.contract.errors import LrauvError
+from planner.contract.progress import SILENT, Progress
 from planner.contract.table import PolicyTable, TimeSlice
 
 __all__ = ["AuditResult", "Mismatch", "audit"]
@@ -220,8 +221,9 @@ def logged_tables(dive: DiveLog) -> dict[str, PolicyTable]:
     return tables
 
 
-def audit(dive: DiveLog) -> AuditResult:
-    """Run the decisions of ``dive`` again and compare them with the logged ones."""
+def audit(dive: DiveLog, *, meter: Progress = SILENT) -> AuditResult:
+    """Run the decisions of ``dive`` again and compare them with the logged ones; ``meter`` hears
+    the decisions compared, of those the log holds."""
     helm_meta = dive.metadata.get("helm")
     if helm_meta is None or "config" not in helm_meta:
         raise LogError(f"{dive.path}: no 'helm' metadata: this log predates the decision audit"
@@ -233,6 +235,8 @@ def audit(dive: DiveLog) -> AuditResult:
     start_index = int(helm_meta.get("goal_index", "0"))
     compared = timed = 0
     mismatches: list[Mismatch] = []
+    total = dive.counts.get(Topic.DECISION, 0)
+    meter.update("auditing decisions", 0, total, unit="decisions")
     for m in dive.messages((Topic.POLICY, Topic.MAVLINK_RX, Topic.DECISION, Topic.LOG)):
         p = m.payload
         if m.topic is Topic.POLICY:
@@ -258,6 +262,7 @@ def audit(dive: DiveLog) -> AuditResult:
                 state.helm = resumed(state.helm, clear_stop="safety stop" in text)
         elif m.topic is Topic.DECISION:
             compared += 1
+            meter.update("auditing decisions", compared, total, unit="decisions")
             made = state.pending.pop(0) if state.pending else None
             audited = None if made is None else made.record()
             if audited is not None and "slice" in audited:
@@ -272,6 +277,7 @@ def audit(dive: DiveLog) -> AuditResult:
     if state is not None and dive.complete:  # in a cut log the last decisions may be cut off: not a difference
         state.run_due()
         mismatches.extend(Mismatch(d.decision.time_s, None, d.record()) for d in state.pending)
+    meter.update("auditing decisions", total, total, unit="decisions")
     varying = tuple(f"{crc}: {slices_text(timeline.slices_record(t))}" for crc, t in tables.items() if t.time_varying)
     return AuditResult(decisions=compared, mismatches=tuple(mismatches), tables=len(tables),
                        swaps=0 if state is None else state.swaps, timed=timed, time_varying=varying)

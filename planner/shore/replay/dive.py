@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.contract.progress import SILENT, Progress
 from planner.shore.replay.autopilot import AutopilotLog, AutopilotReader
 from planner.shore.replay.divelog import DiveLog
 from planner.shore.replay.track_filter import WINDOW_S, FilteredTrack, filter_track, path_length_m
@@ -109,8 +110,9 @@ class Dive:
 _LEVEL_NAMES: dict[object, str] = {int(v): v.name.lower() for v in LogLevel}  # looked up with whatever was logged
 
 
-def load_dive(log: DiveLog) -> Dive:
-    """Read the decisions, vehicle states, policy records and events of ``log`` in one pass."""
+def load_dive(log: DiveLog, *, meter: Progress = SILENT) -> Dive:
+    """Read the decisions, vehicle states, policy records and events of ``log`` in one pass;
+    ``meter`` hears the decisions read, of those the log holds."""
     rows: dict[str, list[Any]] = {k: [] for k in ("time_s", "wall_s", "lat_deg", "lon_deg", "depth_m", "heading_deg",
                                                  "situation", "action", "mode", "cell", "energy", "battery", "goal",
                                                  "changed", "table")}
@@ -124,6 +126,8 @@ def load_dive(log: DiveLog) -> Dive:
     autopilot = AutopilotReader()
     topics = (Topic.DECISION, Topic.STATE, Topic.POLICY, Topic.LOG, Topic.MAVLINK_RX)
     wanted = (b'"name":"SYSTEM_TIME"', b'"name":"STATUSTEXT"', b'"name":"HEARTBEAT"')
+    total = log.counts.get(Topic.DECISION, 0)
+    meter.update("reading decisions", 0, total, unit="decisions")
     for m in log.messages(topics, containing={Topic.MAVLINK_RX: wanted}):
         p = m.payload
         if m.topic is Topic.MAVLINK_RX:
@@ -147,6 +151,7 @@ def load_dive(log: DiveLog) -> Dive:
             rows["goal"].append(goal)
             rows["changed"].append(bool(p.get("changed")))
             rows["table"].append(table)
+            meter.update("reading decisions", len(rows["table"]), total, unit="decisions")
         elif m.topic is Topic.STATE:
             states += 1
             energy = _num(p.get("energy_used_wh"), energy)
@@ -159,6 +164,7 @@ def load_dive(log: DiveLog) -> Dive:
                 table = p.get("table_crc32")
         else:
             events.append(Event(m.log_time_s, _LEVEL_NAMES.get(p.get("level"), "unknown"), str(p.get("message", ""))))
+    meter.update("reading decisions", total, total, unit="decisions")
     f64 = np.float64
     track = Track(
         time_s=np.asarray(rows["time_s"], f64), wall_s=np.asarray(rows["wall_s"], f64),

@@ -29,11 +29,13 @@ from executive.helm import HelmConfig
 from executive.recorder import LogError, Topic, check_head, is_complete
 from planner.shore.replay.payloads import PayloadError, check_fields, check_payload
 from executive.log_records import BoundedRecords
+from planner.contract.progress import SILENT, Progress
 
 __all__ = ["DiveLog", "LogMessage", "open_dive"]
 
 _NS_PER_S = 1_000_000_000
 _KNOWN = {t.value: t for t in Topic}
+_TICK_EVERY = 1000  # messages of a topic between progress reports while reading a log through
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,8 +127,9 @@ class DiveLog:
             yield LogMessage(topic, t, message.publish_time / _NS_PER_S, payload)
 
 
-def open_dive(path: str | os.PathLike[str]) -> DiveLog:
+def open_dive(path: str | os.PathLike[str], *, meter: Progress = SILENT) -> DiveLog:
     """Read ``path`` once through: header, channels, counts, metadata, attachments, where it ends.
+    ``meter`` hears the bytes read.
 
     Raises ``LogError`` for a file that is missing, not MCAP, has no lrauv channel, holds
     a chunk over the memory budget, or helm metadata that is not what the executive writes.
@@ -154,6 +157,8 @@ def open_dive(path: str | os.PathLike[str]) -> DiveLog:
                     unknown[name] = unknown.get(name, 0) + 1
                     continue
                 counts[topic] = counts.get(topic, 0) + 1
+                if counts[topic] % _TICK_EVERY == 0:
+                    meter.update("reading the log", min(f.tell(), size), size, unit="B")
                 t = r.log_time / _NS_PER_S
                 first = t if first is None else first
                 last = t
@@ -171,6 +176,7 @@ def open_dive(path: str | os.PathLike[str]) -> DiveLog:
         raise LogError(f"{p}: no lrauv executive channel in this MCAP file (library {header.library!r});"
                        f" expected topics like {Topic.DECISION.value}; channels seen: {seen}")
     _check_helm(p, metadata.get("helm"))
+    meter.update("reading the log", size, size, unit="B")
     return DiveLog(path=p, size_bytes=size, library=header.library, profile=header.profile, complete=stream.complete,
                    end_byte=size if stream.complete else stream.end_byte, damaged_chunks=tuple(stream.damaged_chunks),
                    unreadable_inside=not stream.complete and is_complete(p),

@@ -104,3 +104,71 @@ def test_a_plan_on_a_terminal_shows_its_bars_unless_quiet(synthetic_forecast, tm
         assert "%|" not in text and "sampling:" not in text, text
     else:
         assert "sampling: 100%|" in text and "solving: 100%|" in text, text
+
+
+# --------------------------------------------------------------------------- replay and audit
+
+
+def test_a_replay_reports_reading_and_auditing_up_to_the_logs_totals(dive_log):
+    from executive.recorder import Topic
+    from planner.shore.replay.audit import audit
+    from planner.shore.replay.dive import load_dive
+    from planner.shore.replay.divelog import open_dive
+
+    meter = Recorder()
+    log = open_dive(dive_log, meter=meter)
+    dive = load_dive(log, meter=meter)
+    result = audit(log, meter=meter)
+    reading = meter.counts("reading the log")
+    assert_climbs_to_total(reading)
+    assert reading[-1][1] == dive_log.stat().st_size
+    decisions = log.counts[Topic.DECISION]
+    for task in ("reading decisions", "auditing decisions"):
+        counts = meter.counts(task)
+        assert_climbs_to_total(counts)
+        assert counts[-1][1] == decisions
+        assert len(counts) > 2  # it moves along the log, not only at its ends
+    assert len(dive.track) == result.decisions == decisions
+
+
+def test_a_replay_off_a_terminal_draws_no_bar(dive_log, capsys):
+    from planner.cli import main
+
+    assert main(["replay", str(dive_log), "--no-audit"]) == 0  # stderr is pytest's capture, not a terminal
+    out, err = capsys.readouterr()
+    assert "decisions" in out  # the summary still comes
+    for text in (out, err):
+        assert "%|" not in text and "\r" not in text and "\u2588" not in text, text
+
+
+def test_a_replay_on_a_terminal_shows_its_bars(dive_log):
+    status, text = _under_a_terminal([LRAUV, "replay", str(dive_log), "--no-audit"])  # the audit's: in-process above
+    assert status == 0, text
+    for task in ("reading the log", "reading decisions"):
+        assert f"{task}: 100%|" in text, text
+
+
+# --------------------------------------------------------------------------- the demo's closed loop
+
+
+def test_the_closed_loop_reads_vehicle_time_and_distance_off_the_track_file_as_written(demo_plan, tmp_path):
+    from planner.shore.demo import TrackWatch, last_track_row, wait_watching
+
+    table = tmp_path / "demo.lrpt"
+    demo_plan.table.save(table)
+    track = tmp_path / "track.csv"
+    meter = Recorder()
+    watch = TrackWatch(track, table, 10.0, meter)
+    watch.poll()  # no file yet: nothing to say
+    assert meter.updates == [] and last_track_row(track) is None
+    goal_lat, goal_lon = demo_plan.table.goal_lat_deg, demo_plan.table.goal_lon_deg
+    header = "time_s,lat_deg,lon_deg,depth_m,heading_deg,mode,armed,energy_used_wh\n"
+    # one degree of latitude south of the goal at 1 h, then a row cut off by the writer's buffer
+    track.write_text(header + f"0.000,{goal_lat - 2},{goal_lon},0,0,19,0,0\n"
+                     f"3600.000,{goal_lat - 1},{goal_lon},0,0,19,1,1.5\n7200.0,{goal_lat}")
+    assert last_track_row(track)["time_s"] == 3600.0
+    proc = subprocess.Popen([sys.executable, "-c", "print('arrived')"], stdout=subprocess.PIPE, text=True)
+    assert wait_watching(proc, 60.0, watch) == "arrived\n" and proc.returncode == 0
+    task, done, total, detail = meter.updates[-1]
+    assert (task, done, total) == ("closed loop", 1.0, 10.0)
+    assert detail == "vehicle 1.00 h, 111.19 km to the goal", detail  # a degree of latitude on the spec's sphere

@@ -175,6 +175,17 @@ def test_same_spec_same_results(gyre, mission):
     assert len({r.time_s for r in a.results}) > 1  # not trivially equal
 
 
+def test_an_evaluation_reports_its_runs_up_to_their_number(gyre, mission):
+    from tests.planner.cli.test_progress import Recorder, assert_climbs_to_total
+
+    spec = _spec(mission, gyre["steady"], World.load(gyre["truth"]), methods=("naive",), n_starts=2)
+    meter = Recorder()
+    campaign = run_all(prepare(spec, meter=meter), meter=meter)
+    assert len(campaign.results) == 2
+    assert meter.counts("runs") == [(0, 2), (1, 2), (2, 2)]  # one tick per run, here in this process
+    assert_climbs_to_total(meter.counts("runs"))
+
+
 # --------------------------------------------------------------------------- physics
 
 
