@@ -11,6 +11,7 @@ signs what it sends and gives every message it decodes a ``signature`` verdict
 
 from __future__ import annotations
 
+import base64
 import math
 import socket
 import time
@@ -446,7 +447,7 @@ def statustext(mav: mavlink.MAVLink, event: Event) -> Any:
 
 
 def describe(msg: Any) -> dict[str, Any]:
-    """A JSON-ready record of a message for the log's raw MAVLink channels."""
+    """A JSON-ready record of a message for the log's raw MAVLink channels: decoded fields and the frame (base64)."""
     fields = {}
     for name in msg.get_fieldnames():
         value = getattr(msg, name)
@@ -455,8 +456,12 @@ def describe(msg: Any) -> dict[str, Any]:
         elif isinstance(value, list):
             value = [v for v in value]
         fields[name] = value
-    return {"msg_id": msg.get_msgId(), "name": msg.get_type(), "src_system": msg.get_srcSystem(),
-            "src_component": msg.get_srcComponent(), "fields": fields}
+    record = {"msg_id": msg.get_msgId(), "name": msg.get_type(), "src_system": msg.get_srcSystem(),
+              "src_component": msg.get_srcComponent(), "fields": fields}
+    frame = msg.get_msgbuf()  # the exact bytes on the wire, signature included; empty for a message never packed
+    if frame:
+        record["frame"] = base64.b64encode(bytes(frame)).decode("ascii")  # what a telemetry log (.tlog) holds
+    return record
 
 
 def command_text(msg: Any) -> str:

@@ -202,6 +202,7 @@ _MAVLINK = _lrauv("lrauv.MavlinkMessage", "One MAVLink message as received or se
 }, {
     "time_s": _NUM,
     "direction": {"type": "string", "enum": ["rx", "tx"]},  # also implied by the topic
+    "frame": {"type": "string", "contentEncoding": "base64"},  # the exact wire bytes (lrauv replay --tlog)
 })
 
 

@@ -36,6 +36,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--simplify-m", type=float, default=2.0, metavar="M",
                    help="the GeoJSON track keeps every filtered position within M metres of its line (default 2)")
     p.add_argument("--gpx", type=Path, help="write the track as GPX 1.1")
+    p.add_argument("--tlog", type=Path, metavar="OUT.tlog",
+                   help="write the logged MAVLink frames as a telemetry log (.tlog: mavlogdump.py, MAVExplorer, QGC)")
     p.add_argument("--no-audit", action="store_true", help="skip running the decisions again")
     p.add_argument("--mavlink", metavar="ADDRESS",
                    help="re-send the recorded telemetry as MAVLink to this pymavlink address (e.g. udpout:127.0.0.1:14550)")
@@ -101,6 +103,12 @@ def _replay(args: argparse.Namespace) -> int:
             print(f"  ... and {len(result.mismatches) - _MAX_LISTED:,} more")
         status = 0 if result.clean else EXIT_AUDIT_DIFFERS
     written = _exports(args, dive)
+    if args.tlog is not None:
+        from planner.shore.replay.tlog import write_tlog
+
+        tlog = write_tlog(log, args.tlog, first_offset_s=dive.unix_offset_s)
+        print(f"tlog       {tlog.describe()}")
+        written.append(tlog.path)
     if args.report is not None:
         from planner.shore.replay.report import write_report
 
