@@ -65,8 +65,15 @@ endif
 typecheck: $(STAMP)
 	$(PY) -m mypy
 
-test: $(STAMP) node typecheck
-	$(PY) -m pytest
+# Two pytest workers (pytest-xdist), handed tests as they free up. Before them, the planners' numba kernels compile
+# into their on-disk cache beside the type check, a core each, so that no worker compiles them again.
+TEST_WORKERS ?= 2
+
+test: $(STAMP) node
+	@$(PY) -m tests.support.warm_kernels & warm=$$!; \
+	  echo "$(PY) -m mypy"; $(PY) -m mypy; typed=$$?; wait $$warm; warmed=$$?; \
+	  test $$typed = 0 && test $$warmed = 0
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist worksteal
 
 bench: $(STAMP)
 	$(PY) bench/bench_plan.py
