@@ -42,7 +42,8 @@ def add_parser(sub: Subcommands) -> None:
     ex.add_argument("--mission", type=Path,
                     help="mission YAML: goals, vehicle figures, safety limits; enables onboard replanning")
     ex.add_argument("--gcs", metavar="ADDRESS",
-                    help="pymavlink address to hear a ground station on, for uploads (e.g. udpin:0.0.0.0:14551)")
+                    help="pymavlink address to hear a ground station on (e.g. udpin:0.0.0.0:14551): uploads, and the"
+                         " autopilot's traffic both ways as through a MAVLink router (docs/ground-station.md)")
     ex.add_argument("--watch", type=Path, metavar="DIR",
                     help="replan when a new forecast (*.nc) appears here (default: the mission's forecast.directory)")
     ex.add_argument("--work-dir", type=Path, help="uploaded forecasts and onboard plans (default: beside the log)")
@@ -227,6 +228,8 @@ def _exec(args: argparse.Namespace) -> int:
         if executive.signature_refusals:
             print("signing    refused " + ", ".join(f"{n:,} {verdict.value}"
                                                      for verdict, n in executive.signature_refusals.items()))
+        if executive.gcs is not None:
+            print(executive.router.summary().replace("ground station: ", "gcs        ", 1))
         dropped = executive.recorder.records_dropped
         lost = f" ({dropped:,} records dropped: the disk failed or fell behind)" if dropped else ""
         print(f"log        {s.log_path}{lost}", flush=True)

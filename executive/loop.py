@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import envelope, goal_tables, plausibility, timeline
+from executive import envelope, goal_tables, ground_station, parameters, plausibility, timeline
 from executive import signing
 from executive.clock import VehicleClock
 from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, rebooted, resume_text, resumed, step
@@ -32,6 +32,7 @@ from executive.latency import LatencyHistogram
 from executive.links import LinkGuard
 from executive.mission_protocol import addressed_to
 from executive.plan_changes import PlanChanges
+from executive.station_link import StationLink
 from executive.raw_log import RawFilter
 from executive.goal_tables import MissionPlan
 from executive.recorder import Recorder, Topic
@@ -96,7 +97,7 @@ class RunSummary:
     message_p99_us: float | None = None  # including the MCAP writes
 
 
-class Executive(PlanChanges):
+class Executive(PlanChanges, StationLink):
     """Runs the helm against a live MAVLink link until told to stop or the mission ends."""
 
     def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *,
@@ -135,6 +136,7 @@ class Executive(PlanChanges):
                                         source_component=bridge.EXECUTIVE_COMPONENT,
                                         client_timeout_s=config.gcs_client_timeout_s)
             self.gcs_mav = bridge.new_mav(self.gcs, streams=self.streams, link_id=signing.LINK_ID_GROUND_STATION)
+        self.router = ground_station.Router(autopilot_system=config.autopilot_system)  # the ground station's traffic
         # UDP carries whole frames in each datagram: the parser starts afresh with each, so the tail of
         # a cut frame can never join the next datagram's bytes into a frame nobody sent (TCP is a stream).
         self._datagrams = isinstance(self.conn, mavutil.mavudp)
@@ -234,6 +236,8 @@ class Executive(PlanChanges):
         if self.state_writer is not None:
             for event in self.state_writer.close():
                 self._log(self.recorder.log, self.clock.now_s(time.monotonic()), event.level, event.text)
+        if self.gcs is not None:
+            self._log(self.recorder.log, self.clock.now_s(time.monotonic()), "info", self.router.summary())
         self._write_later()
         self.recorder.close()
         self.conn.close()
@@ -274,6 +278,7 @@ class Executive(PlanChanges):
                 decided = self._on_message(msg, wall)
                 if decided:
                     self.decision_latency.add(time.perf_counter() - t0)
+                self._to_ground(msg)  # once the decision's commands are out
                 self._write_later()
                 if decided:
                     self.message_cost.add(time.perf_counter() - t0)
@@ -309,7 +314,7 @@ class Executive(PlanChanges):
                 if not self._admitted(msg, signing.Link.GROUND_STATION, now_s, from_autopilot=False):
                     continue
                 self._log(self._record_rx, now_s, msg)
-                self._upload_message(msg, self.gcs_mav, now_s)
+                self._from_ground(msg, now_s)
         self._write_later()
 
     def _admitted(self, msg: Any, link: signing.Link, now_s: float, *, from_autopilot: bool) -> bool:
@@ -335,8 +340,8 @@ class Executive(PlanChanges):
         return False
 
     def _upload_message(self, msg: Any, mav: Any, now_s: float) -> None:
-        if msg.get_type() == "COMMAND_LONG":
-            self._operator_command(msg, mav, now_s)
+        if msg.get_type() in ground_station.COMMANDS | parameters.MESSAGES:
+            self._component_message(msg, mav, now_s)  # executive.station_link
             return
         try:
             replies = self.uploads.handle(msg, mav, time.monotonic())
@@ -347,17 +352,6 @@ class Executive(PlanChanges):
             return
         for reply in replies:
             self._send_on(mav, now_s, reply)
-
-    def _operator_command(self, msg: Any, mav: Any, now_s: float) -> None:
-        """COMMAND_LONG addressed to the executive: MAV_CMD_MISSION_START resumes (docs/executive.md, "Authority")."""
-        if not addressed_to(msg, bridge.EXECUTIVE_SYSTEM, bridge.EXECUTIVE_COMPONENT) or msg.target_system == 0:
-            return
-        peer = (msg.get_srcSystem(), msg.get_srcComponent())
-        if msg.command != bridge.MAV_CMD_MISSION_START:
-            self._send_on(mav, now_s, bridge.command_ack(mav, msg.command, bridge.MAV_RESULT_UNSUPPORTED, peer))
-            return
-        self._resume(now_s, clear_stop=True, source=f"MAV_CMD_MISSION_START from {peer[0]}/{peer[1]}")
-        self._send_on(mav, now_s, bridge.command_ack(mav, msg.command, bridge.MAV_RESULT_ACCEPTED, peer))
 
     def _resume(self, now_s: float, *, clear_stop: bool, source: str) -> None:
         """An operator's explicit go: logged in the words the decision audit looks for."""
@@ -416,9 +410,11 @@ class Executive(PlanChanges):
         if not mine or self.raw.keep(kind):  # ArduSub's unused default streams are only counted
             self._log(self._record_rx, now_s, msg, note)
         if not mine:
-            if kind in Uploads.MESSAGES or kind == "COMMAND_LONG":  # a ground station routed through the autopilot
+            if kind in Uploads.MESSAGES | ground_station.COMMANDS | parameters.MESSAGES:  # a GCS behind the autopilot
                 self._upload_message(msg, self.mav, now_s)
             return False
+        if not ground_station.for_executive(msg, self.router.executive):
+            return False  # the autopilot's answer to a ground station: forwarded, not ours
         if t_boot is not None:
             if t_boot < self._last_time.get(kind, -1.0):
                 self._counts["stale"] += 1  # reordered or duplicated datagram: never step back in time
@@ -435,7 +431,10 @@ class Executive(PlanChanges):
             level: LogLevelName = "info" if kind == "STATUSTEXT" and msg.severity > 4 else "warning"
             if kind == "COMMAND_ACK" and msg.result == 0:
                 level = "info"
-            self._event(now_s, Event(level, bridge.command_text(msg)))
+            if kind == "STATUSTEXT" and self.gcs is not None:  # the ground station has it as sent: not repeated
+                self._log(self.recorder.log, now_s, level, bridge.command_text(msg))
+            else:
+                self._event(now_s, Event(level, bridge.command_text(msg)))
         if kind == "GLOBAL_POSITION_INT":
             self._log(self._record_state, now_s, self.vehicle)
         if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):

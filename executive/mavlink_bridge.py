@@ -484,3 +484,37 @@ MAV_RESULT_UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 def command_ack(mav: mavlink.MAVLink, command: int, result: int, peer: tuple[int, int]) -> Any:
     """COMMAND_ACK for a command the executive received from ``peer`` (system, component)."""
     return mav.command_ack_encode(command, result, 0, 0, peer[0], peer[1])
+
+
+# -- the ground-station link as a router sees it (executive.ground_station) ---------------
+
+def listening(conn: Any) -> bool:
+    """Whether a write on ``conn`` reaches anyone now: a listening UDP link only writes to clients heard recently."""
+    recipients = getattr(conn, "recipients", None)
+    if recipients is not None and getattr(conn, "udp_server", False):
+        return bool(recipients(time.monotonic()))
+    return not getattr(conn, "closed", False)
+
+
+def forward(conn: Any, frame: bytes) -> bool:
+    """Write another node's frame as it came (never re-packed or re-signed); False when the send failed."""
+    try:
+        conn.write(frame)
+    except Exception:  # a router drops what it cannot send, as UDP may; the loop never stops for it
+        return False
+    return True
+
+
+def param_value(mav: mavlink.MAVLink, name: str, value: float, index: int, count: int) -> Any:
+    """PARAM_VALUE of one of the executive's parameters (all MAV_PARAM_TYPE_REAL32, executive.parameters)."""
+    return mav.param_value_encode(name.encode("ascii"), value, mavlink.MAV_PARAM_TYPE_REAL32, count, index)
+
+
+# What the executive's component speaks: MAVLink 2, MAVLink FTP, MISSION_ITEM_INT, float parameters.
+CAPABILITIES = (mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mavlink.MAV_PROTOCOL_CAPABILITY_FTP
+                | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT)
+
+
+def autopilot_version(mav: mavlink.MAVLink) -> Any:
+    """AUTOPILOT_VERSION of the executive's component: its capabilities; versions and ids 0 (not known)."""
+    return mav.autopilot_version_encode(CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0, [0] * 18)
