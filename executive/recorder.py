@@ -1,10 +1,13 @@
 """The executive's MCAP log: writing it, reading it back, and recovering one left by a killed process.
 
-One file per run, JSON messages on a fixed set of topics (``Topic``), two of
-them Foxglove well-known schemas so the Foxglove app draws the track (Map
-panel, ``foxglove.LocationFix``) and the events (Log panel, ``foxglove.Log``)
-without configuration. Log times are vehicle time since boot (``time_boot_ms``,
-as ``executive.clock`` extrapolates it); publish times are the wall clock.
+One file per run, JSON messages on a fixed set of topics (``executive.log_topics.Topic``),
+some on Foxglove's well-known schemas so the Foxglove app draws the track (Map panel,
+``foxglove.LocationFix``), the events (Log panel, ``foxglove.Log``) and the goals, geofence and
+running plan (``foxglove.GeoJSON``) without configuration. Log times are UTC nanoseconds, from
+the autopilot's SYSTEM_TIME (``executive.log_clock``: records before it are held, then dated;
+the host clock stands in when none comes); each payload keeps its vehicle time since boot
+(``time_boot_ms`` as ``executive.clock`` extrapolates it) in ``boot_time_s``. Foxglove
+``timestamp`` fields are the log time. Publish times are the host's wall clock when written.
 
 Crash safety: records go into small chunks and the loop calls ``maybe_flush`` every
 iteration, so a SIGKILL loses at most ``flush_interval_s`` of data (and, in the
@@ -18,8 +21,6 @@ Standard library and ``mcap`` only: the executive stays light.
 
 from __future__ import annotations
 
-import base64
-import dataclasses
 import json
 import math
 import os
@@ -28,20 +29,23 @@ import threading
 import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
-from enum import Enum, IntEnum
 from pathlib import Path
-from typing import IO, Any, BinaryIO, Literal, Self, cast, get_args
+from typing import IO, Any, BinaryIO, Self, cast
 
 from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
 
+from executive.log_clock import ClockSource, LogClock
 from executive.log_records import BoundedRecords, LogError
+from executive.log_topics import (BOOT_TIME_KEY, NS_PER_S, LogLevel, LogLevelName, Topic, boot_time_of, encode,
+                                  foxglove_time, level_code, time_ns)
 from executive.log_writer import Background, Flush, PendingFile, reason_of, spool_chunk_indexes
 from executive.state import Event
 from planner.contract.atomic import atomic_target
 
-__all__ = ["LogError", "LogLevel", "Recorder", "Recovery", "Topic", "check_head", "is_complete", "read_messages", "recover"]
+__all__ = ["LogError", "LogLevel", "LogLevelName", "Recorder", "Recovery", "Topic", "check_head", "is_complete",
+           "read_messages", "recover"]
 
 _MAGIC = b"\x89MCAP0\r\n"  # MCAP spec, "Magic"
 _FOOTER_BYTES = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
@@ -55,268 +59,6 @@ _COMPRESSION = CompressionType.ZSTD
 # All indexes (mcap's advice "if in doubt, choose ALL"). Message indexes are ~30% of the file
 # (16 bytes a message, uncompressed) but let readers skip chunks without a wanted topic.
 _INDEXES = IndexType.ALL
-_NS_PER_S = 1_000_000_000
-
-
-# -- topics and schemas ------------------------------------------------------------------
-
-# Foxglove's published JSON schemas (foxglove/schemas, schemas/jsonschema/*.json), written
-# out by hand; only the standard fields. Timestamps are {sec, nsec}.
-_FOXGLOVE_TIME: dict[str, Any] = {
-    "type": "object",
-    "title": "time",
-    "properties": {
-        "sec": {"type": "integer", "minimum": 0},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
-    },
-}
-
-
-def _enum(description: str, names: Iterable[str]) -> dict[str, Any]:
-    return {"description": description, "oneOf": [{"title": n, "const": i} for i, n in enumerate(names)]}
-
-
-_LOCATION_FIX: dict[str, Any] = {
-    "title": "foxglove.LocationFix",
-    "description": "A navigation satellite fix for any Global Navigation Satellite System",
-    "type": "object",
-    "properties": {
-        "timestamp": {**_FOXGLOVE_TIME, "description": "Timestamp of the message"},
-        "frame_id": {"type": "string", "description": "Frame for the sensor"},
-        "latitude": {"type": "number", "description": "Latitude in degrees"},
-        "longitude": {"type": "number", "description": "Longitude in degrees"},
-        # Foxglove: metres above the WGS84 ellipsoid; we write -depth_m (sea level ~ ellipsoid).
-        "altitude": {"type": "number", "description": "Altitude in meters"},
-        "position_covariance": {
-            "type": "array", "items": {"type": "number"}, "minItems": 9, "maxItems": 9,
-            "description": "Position covariance (m^2), ENU, row-major",
-        },
-        "position_covariance_type": _enum(
-            "Type of position_covariance", ("UNKNOWN", "APPROXIMATED", "DIAGONAL_KNOWN", "KNOWN")),
-    },
-}
-
-_LOG: dict[str, Any] = {
-    "title": "foxglove.Log",
-    "description": "A log message",
-    "type": "object",
-    "properties": {
-        "timestamp": {**_FOXGLOVE_TIME, "description": "Timestamp of log message"},
-        "level": _enum("Log level", ("UNKNOWN", "DEBUG", "INFO", "WARNING", "ERROR", "FATAL")),
-        "message": {"type": "string", "description": "Log message"},
-        "name": {"type": "string", "description": "Process or node name"},
-        "file": {"type": "string", "description": "Filename"},
-        "line": {"type": "integer", "minimum": 0, "description": "Line number in the file"},
-    },
-}
-
-_NUM = {"type": "number"}
-_NUM_OR_NULL = {"type": ["number", "null"]}
-_INT = {"type": "integer"}
-_STR = {"type": "string"}
-_STR_OR_NULL = {"type": ["string", "null"]}
-_BOOL = {"type": "boolean"}
-_OBJ = {"type": "object"}
-
-
-def _lrauv(name: str, description: str, required: Mapping[str, Any], optional: Mapping[str, Any] | None = None
-           ) -> dict[str, Any]:
-    """A JSON schema for one of our own topics: ``required`` keys are in every payload.
-
-    Objects stay open (no ``additionalProperties: false``), so a field added to a value
-    object later does not make older readers reject the log.
-    """
-    return {
-        "title": name,
-        "description": description,
-        "type": "object",
-        "properties": {**required, **(optional or {})},
-        "required": list(required),
-    }
-
-
-_VEHICLE_STATE = _lrauv("lrauv.VehicleState", "The executive's picture of the vehicle; null = not yet known", {
-    "time_s": _NUM,  # vehicle time since boot
-    "lat_deg": _NUM_OR_NULL,
-    "lon_deg": _NUM_OR_NULL,
-    "depth_m": _NUM_OR_NULL,  # positive down
-    "heading_deg": _NUM_OR_NULL,  # compass, clockwise from north
-    "mode": {"type": ["integer", "null"]},  # HEARTBEAT.custom_mode
-    "armed": _BOOL,
-    "position_ok": _BOOL,
-    "battery_pct": _NUM_OR_NULL,
-    "energy_used_wh": _NUM_OR_NULL,
-}, {"heartbeat_s": _NUM_OR_NULL})
-
-_DECISION = _lrauv("lrauv.Decision", "One helm decision: where the vehicle was and what the policy said", {
-    "time_s": _NUM,
-    "lat_deg": _NUM_OR_NULL,
-    "lon_deg": _NUM_OR_NULL,
-    "depth_m": _NUM_OR_NULL,
-    "heading_deg": _NUM_OR_NULL,
-    # policy-table state index, axis order [l, j, i, k] (docs/policy-table.md)
-    "cell": {"type": ["array", "null"], "items": _INT, "minItems": 4, "maxItems": 4},
-    "situation": _STR,
-    "action": _STR_OR_NULL,
-    "mode": _STR,
-    "changed": _BOOL,
-}, {
-    # time-varying plans only (executive.timeline): the slice decided with, and why that slice
-    "slice": _INT,
-    "slice_status": {"type": "string", "enum": ["in_horizon", "before_start", "past_horizon", "time_unknown"]},
-})
-
-_COMMAND = _lrauv("lrauv.Command", "A command the helm sent; the remaining keys are the command's fields", {
-    "time_s": _NUM,
-    "kind": _STR,  # SetMode, Arm, VelocityYaw, DepthTarget, ...
-})
-
-_POLICY = _lrauv("lrauv.Policy", "A policy table the executive loaded, swapped in or refused", {
-    "time_s": _NUM,
-    "reason": {"type": "string", "enum": ["loaded", "received", "swapped", "refused"]},
-}, {
-    "table_crc32": {"type": "string", "pattern": "^[0-9a-f]{8}$"},  # absent only when a refused file is no table
-    "source": _STR,  # what brought the table: upload PATH, onboard plan (REASON), next goal
-    "goal_index": _INT,
-    "previous": _OBJ,  # the replaced table's table_crc32, forecast_identity, forecast_time
-    "forecast_identity": _STR_OR_NULL,
-    "forecast_time": _STR_OR_NULL,
-    "latency_s": _NUM,  # onboard plans: from the trigger (a new forecast seen) to the table ready
-    "plan_s": _NUM,  # onboard plans: the planner process alone
-    "refusal": _STR,
-    "forecast": {"type": "object", "properties": {"identity": _STR, "time": _STR_OR_NULL}},
-    "grid": _OBJ,
-    "goal": _OBJ,
-    "model": _STR_OR_NULL,
-    "criterion": _STR_OR_NULL,
-    # time-varying tables only: how many slices, the first's and the last's UTC time
-    "slices": {"type": "object", "properties": {"count": _INT, "first_utc": _STR, "last_utc": _STR}},
-})
-
-_MAVLINK = _lrauv("lrauv.MavlinkMessage", "One MAVLink message as received or sent", {
-    "msg_id": _INT,
-    "name": _STR,
-    "src_system": _INT,
-    "src_component": _INT,
-    "fields": _OBJ,  # field name -> value, MAVLink units (common.xml)
-}, {
-    "time_s": _NUM,
-    "direction": {"type": "string", "enum": ["rx", "tx"]},  # also implied by the topic
-    "frame": {"type": "string", "contentEncoding": "base64"},  # the exact wire bytes (lrauv replay --tlog)
-})
-
-
-class Topic(Enum):
-    """The log's topics; ``value`` is the MCAP topic name."""
-
-    FIX = "/vehicle/fix"
-    LOG = "/log"
-    STATE = "/vehicle/state"
-    DECISION = "/executive/decision"
-    COMMAND = "/executive/command"
-    POLICY = "/executive/policy"
-    MAVLINK_RX = "/mavlink/rx"
-    MAVLINK_TX = "/mavlink/tx"
-
-    @property
-    def schema_name(self) -> str:
-        """``foxglove.*`` for Foxglove's well-known schemas, ``lrauv.*`` for ours (the schema's title)."""
-        return str(self.schema["title"])
-
-    @property
-    def schema(self) -> Mapping[str, Any]:
-        """The JSON schema (a shared dict; do not mutate)."""
-        return _SCHEMAS[self]
-
-    @property
-    def required(self) -> tuple[str, ...]:
-        """Keys every payload on this topic has (the schema's ``required``)."""
-        return tuple(self.schema.get("required", ()))
-
-
-_SCHEMAS: dict[Topic, dict[str, Any]] = {
-    Topic.FIX: _LOCATION_FIX,
-    Topic.LOG: _LOG,
-    Topic.STATE: _VEHICLE_STATE,
-    Topic.DECISION: _DECISION,
-    Topic.COMMAND: _COMMAND,
-    Topic.POLICY: _POLICY,
-    Topic.MAVLINK_RX: _MAVLINK,  # both directions share one schema
-    Topic.MAVLINK_TX: _MAVLINK,
-}
-
-
-class LogLevel(IntEnum):
-    """foxglove.LogLevel (Log.json)."""
-
-    UNKNOWN = 0
-    DEBUG = 1
-    INFO = 2
-    WARNING = 3
-    ERROR = 4
-    FATAL = 5
-
-
-LogLevelName = Literal["debug", "info", "warning", "error"]
-_LEVELS: dict[str, int] = {name: int(LogLevel[name.upper()]) for name in get_args(LogLevelName)}
-
-
-# -- JSON encoding (pure) ------------------------------------------------------------------
-
-
-def _json_default(obj: Any) -> Any:
-    """What the C encoder cannot do itself; called only for such objects, so it costs nothing otherwise."""
-    if isinstance(obj, Enum):
-        return obj.value
-    if isinstance(obj, bytes | bytearray | memoryview):
-        return base64.b64encode(obj).decode("ascii")  # Foxglove's JSON convention for bytes
-    if isinstance(obj, set | frozenset):
-        return list(obj)
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
-    if hasattr(obj, "dtype") and hasattr(obj, "item"):  # a numpy scalar, without importing numpy
-        return obj.item()
-    raise TypeError(f"object of type {type(obj).__name__} is not JSON serialisable")
-
-
-def _sanitise(obj: Any) -> Any:
-    """A copy with non-finite floats as null and every key a string; the slow path only."""
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, str | int | bool) or obj is None:
-        return obj
-    if isinstance(obj, Mapping):
-        return {_key(k): _sanitise(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_sanitise(v) for v in obj]
-    return _sanitise(_json_default(obj))
-
-
-def _key(key: Any) -> str:
-    key = key.value if isinstance(key, Enum) else key
-    if isinstance(key, str):
-        return key
-    return json.dumps(key) if isinstance(key, bool | int | float) else str(key)  # as json spells such keys
-
-
-# Compact and strict: allow_nan=False makes NaN/inf raise, and the slow path writes null
-# (bare NaN is not JSON; Foxglove and json.loads in other languages reject it).
-_ENCODE = json.JSONEncoder(separators=(",", ":"), allow_nan=False, default=_json_default).encode
-
-
-def _time_ns(t_s: float, what: str) -> int:
-    """Seconds -> int ns, exact to the float: a Unix time times 1e9 would lose ~100 ns to rounding."""
-    try:
-        sec = math.floor(t_s)
-        ns = sec * _NS_PER_S + round((t_s - sec) * _NS_PER_S)
-    except (ValueError, OverflowError, TypeError):
-        raise LogError(f"{what}: expected a finite time in seconds; got {t_s!r}") from None
-    return max(ns, 0)  # MCAP times are unsigned
-
-
-def _foxglove_time(ns: int) -> dict[str, int]:
-    sec, nsec = divmod(max(ns, 0), _NS_PER_S)
-    return {"sec": sec, "nsec": nsec}
 
 
 # -- writing -----------------------------------------------------------------------------
@@ -337,7 +79,7 @@ class Recorder:
     def __init__(self, path: str | os.PathLike[str], *, chunk_size: int = 64 * 1024, flush_interval_s: float = 1.0,
                  profile: str = "lrauv", metadata: Mapping[str, Mapping[str, str]] | None = None,
                  background: bool = False, max_queued_records: int = 50_000, max_queued_bytes: int = 16 * 1024 * 1024,
-                 close_timeout_s: float = 5.0) -> None:
+                 close_timeout_s: float = 5.0, utc_offset_ns: int | None = None, max_held_records: int = 5000) -> None:
         if not (isinstance(chunk_size, int) and chunk_size > 0):
             raise LogError(f"chunk_size: expected a positive number of bytes; got {chunk_size!r}")
         if not (math.isfinite(flush_interval_s) and flush_interval_s >= 0):
@@ -360,6 +102,9 @@ class Recorder:
         self._closed = False
         self._finished = False
         self._last_flush_wall_s = time.monotonic()
+        # Vehicle time -> UTC log time; ``utc_offset_ns`` known from the start, else held for SYSTEM_TIME.
+        self._clock = LogClock(utc_offset_ns, max_records=max_held_records)
+        self._described: dict[str, str] | None = None
         self._writer.start(profile, _LIBRARY)  # into memory: the file sees it at the first push
         self._background: Background | None = None
         try:
@@ -367,6 +112,8 @@ class Recorder:
                 self._background = Background(self, max_records=max_queued_records, max_bytes=max_queued_bytes)
             for name, data in (metadata or {}).items():
                 self.metadata(name, data)
+            if self._clock.known:
+                self._describe_clock()
             if self._background is not None:
                 self._background.request(Flush(fsync=False))  # the header to the file: a killed run leaves a log
             else:
@@ -381,55 +128,108 @@ class Recorder:
               publish_time_s: float | None = None) -> None:
         """Log ``payload`` as JSON at vehicle time ``log_time_s`` (may go backwards: reboots).
 
-        NaN/inf are written as null, Enums as their value, tuples as arrays;
-        ``publish_time_s`` (Unix seconds) defaults to the wall clock now.
+        The payload gets ``boot_time_s`` (= ``log_time_s``) as its last key; the log time is UTC
+        (``executive.log_clock``). NaN/inf are written as null, Enums as their value, tuples as
+        arrays; ``publish_time_s`` (Unix seconds) defaults to the wall clock now.
         """
-        publish_ns = time.time_ns() if publish_time_s is None else _time_ns(publish_time_s, "publish_time_s")
-        self._write(topic, log_time_s, payload, publish_ns)
+        self._write(topic, log_time_s, payload, _publish_ns(publish_time_s), stamp=False)
 
-    def _write(self, topic: Topic, log_time_s: float, payload: Mapping[str, object], publish_ns: int) -> None:
+    def _write(self, topic: Topic, log_time_s: float, payload: Mapping[str, object], publish_ns: int, *,
+               stamp: bool) -> None:
         if self._closed:
             raise LogError(f"{self.path}: write to {topic.value} after close()")
         try:
-            data = _ENCODE(payload).encode()
-        except (ValueError, TypeError):  # NaN/inf, or keys/values the fast path cannot take
-            try:
-                data = _ENCODE(_sanitise(payload)).encode()
-            except (ValueError, TypeError, RecursionError) as exc:  # RecursionError: a cycle
-                raise LogError(f"{self.path}: {topic.value}: payload is not JSON serialisable: {exc}") from None
-        try:
-            log_ns = round(log_time_s * _NS_PER_S)
+            vehicle_ns = round(log_time_s * NS_PER_S)
         except (ValueError, OverflowError, TypeError):
             raise LogError(f"{self.path}: {topic.value}: expected a finite log_time_s; got {log_time_s!r}") from None
+        body = dict(payload)
+        body.pop(BOOT_TIME_KEY, None)
+        body[BOOT_TIME_KEY] = log_time_s  # last: readers take it off the end (log_topics.boot_time_of)
+        try:
+            data = encode(body)
+        except (ValueError, TypeError) as exc:
+            raise LogError(f"{self.path}: {topic.value}: payload is not JSON serialisable: {exc}") from None
         seq = self._sequence.get(topic, 0)
         self._sequence[topic] = (seq + 1) & 0xFFFFFFFF
         self._dirty = True
-        self._submit(("message", topic, max(log_ns, 0), data, publish_ns, seq), len(data))  # MCAP times are unsigned
+        op = ("message", topic, vehicle_ns, data, publish_ns, seq, stamp)
+        if self._clock.offset_ns is None:
+            if self._clock.hold(vehicle_ns, op, len(data)):
+                self._clock.fall_back(vehicle_ns)
+                self._clock_known()
+            return
+        self._submit(_dated(op, vehicle_ns + self._clock.offset_ns), len(data))
 
     def location_fix(self, log_time_s: float, *, lat_deg: float, lon_deg: float, depth_m: float,
-                     unix_time_s: float | None = None, frame_id: str = "vehicle") -> None:
-        """A foxglove.LocationFix for the Map panel; altitude = -depth_m, covariance unknown."""
-        unix_ns = time.time_ns() if unix_time_s is None else _time_ns(unix_time_s, "unix_time_s")
-        self._write(Topic.FIX, log_time_s, {
-            "timestamp": _foxglove_time(unix_ns),
+                     heading_deg: float | None = None, velocity_enu_m_s: tuple[float, float, float] | None = None,
+                     frame_id: str = "vehicle", publish_time_s: float | None = None) -> None:
+        """A foxglove.LocationFix for the Map panel; altitude = -depth_m, covariance unknown.
+
+        ``heading_deg`` (compass) is written as ``heading``, radians clockwise from north as the
+        schema defines it; ``velocity_enu_m_s`` as ``velocity`` (east, north, up).
+        """
+        fix: dict[str, object] = {
             "frame_id": frame_id,
             "latitude": lat_deg,
             "longitude": lon_deg,
             "altitude": -depth_m,
             "position_covariance": _NO_COVARIANCE,
             "position_covariance_type": 0,  # UNKNOWN
-        }, unix_ns)
+        }
+        if heading_deg is not None and math.isfinite(heading_deg):
+            fix["heading"] = math.radians(heading_deg % 360.0)
+        if velocity_enu_m_s is not None:
+            fix["velocity"] = dict(zip("xyz", velocity_enu_m_s, strict=True))
+        self._write(Topic.FIX, log_time_s, fix, _publish_ns(publish_time_s), stamp=True)
 
     def log(self, log_time_s: float, level: LogLevelName, text: str, *, name: str = "executive",
-            unix_time_s: float | None = None) -> None:
-        """A foxglove.Log line for the Log panel."""
-        code = _LEVELS.get(level)
-        if code is None:
-            raise LogError(f"log level: expected one of {list(_LEVELS)}; got {level!r}")
-        unix_ns = time.time_ns() if unix_time_s is None else _time_ns(unix_time_s, "unix_time_s")
-        self._write(Topic.LOG, log_time_s, {
-            "timestamp": _foxglove_time(unix_ns), "level": code, "message": text, "name": name,
-        }, unix_ns)
+            publish_time_s: float | None = None) -> None:
+        """A foxglove.Log line for the Log panel (no source file: ``file`` empty, ``line`` 0)."""
+        self._write(Topic.LOG, log_time_s, {"level": level_code(level), "message": text, "name": name, "file": "",
+                                            "line": 0}, _publish_ns(publish_time_s), stamp=True)
+
+    def geojson(self, topic: Topic, log_time_s: float, layer: Mapping[str, Any], *,
+                publish_time_s: float | None = None) -> None:
+        """A foxglove.GeoJSON message: ``layer`` (a GeoJSON object) replaces the topic's last on the map."""
+        if topic.schema_name != "foxglove.GeoJSON":
+            raise LogError(f"{self.path}: {topic.value} is not a foxglove.GeoJSON topic")
+        try:
+            text = encode(layer).decode()
+        except (ValueError, TypeError) as exc:
+            raise LogError(f"{self.path}: {topic.value}: GeoJSON is not JSON serialisable: {exc}") from None
+        self._write(topic, log_time_s, {"geojson": text}, _publish_ns(publish_time_s), stamp=True)
+
+    # -- the clock --------------------------------------------------------------------------
+
+    def system_time(self, time_unix_usec: int, boot_s: float | None) -> None:
+        """The autopilot's SYSTEM_TIME (its UTC at vehicle time ``boot_s``); 0 means it has none yet."""
+        if time_unix_usec > 0 and boot_s is not None and math.isfinite(boot_s):
+            self.set_utc_offset(time_unix_usec * 1000 - round(boot_s * NS_PER_S), "autopilot SYSTEM_TIME")
+
+    def set_utc_offset(self, offset_ns: int, source: ClockSource) -> None:
+        """UTC = vehicle time + ``offset_ns`` from now on; held records are written with it."""
+        self._check_open("set the clock")
+        first = self._clock.source
+        if self._clock.adopt(int(offset_ns), source):
+            self._clock_known(first != self._clock.source)
+
+    @property
+    def clock_source(self) -> ClockSource | None:
+        """Where the log times' UTC comes from; None while records wait for it."""
+        return self._clock.source
+
+    def _clock_known(self, describe: bool = True) -> None:
+        assert self._clock.offset_ns is not None
+        for log_ns, op in self._clock.release():
+            self._submit(_dated(op, log_ns), len(op[3]) if op[0] == "message" else len(op[5]))
+        if describe:
+            self._describe_clock()
+
+    def _describe_clock(self) -> None:
+        described = self._clock.metadata()
+        if described != self._described:
+            self._described = described
+            self.metadata("clock", described)
 
     # -- metadata and attachments ------------------------------------------------------------
 
@@ -445,8 +245,17 @@ class Recorder:
                log_time_s: float = 0.0) -> None:
         """An attachment (exact bytes), e.g. the uploaded policy table."""
         self._check_open(f"attachment {name!r}")
-        self._submit(("attachment", time.time_ns(), _time_ns(log_time_s, "log_time_s"), name, media_type,
-                      bytes(data)), len(data))
+        try:
+            vehicle_ns = round(log_time_s * NS_PER_S)
+        except (ValueError, OverflowError, TypeError):
+            raise LogError(f"attachment {name!r}: expected a finite log_time_s; got {log_time_s!r}") from None
+        op = ("attachment", time.time_ns(), vehicle_ns, name, media_type, bytes(data))
+        if self._clock.offset_ns is None:
+            if self._clock.hold(vehicle_ns, op, len(data)):
+                self._clock.fall_back()
+                self._clock_known()
+            return
+        self._submit(_dated(op, vehicle_ns + self._clock.offset_ns), len(data))
 
     # -- durability ---------------------------------------------------------------------------
 
@@ -489,6 +298,11 @@ class Recorder:
         """
         if self._closed:
             return
+        if self._clock.holding:  # no UTC came: the host's clock, said so in the metadata
+            self._clock.fall_back()
+            self._clock_known()
+        elif self._clock.known:
+            self._describe_clock()  # offsets adopted since it was first described
         self._closed = True
         if self._background is not None:
             self._background.close(self._close_timeout_s)
@@ -594,6 +408,22 @@ class Recorder:
 _NO_COVARIANCE = (0.0,) * 9
 
 
+def _publish_ns(publish_time_s: float | None) -> int:
+    """A publish time (Unix s) in ns; None: the wall clock now."""
+    return time.time_ns() if publish_time_s is None else time_ns(publish_time_s, "publish_time_s")
+
+
+def _dated(op: tuple[Any, ...], log_ns: int) -> tuple[Any, ...]:
+    """A held or new record with its UTC log time; a Foxglove payload gets it as its ``timestamp`` too."""
+    if op[0] == "attachment":
+        return (*op[:2], max(log_ns, 0), *op[3:])
+    _, topic, _, data, publish_ns, seq, stamp = op
+    log_ns = max(log_ns, 0)  # MCAP times are unsigned
+    if stamp:  # the payload's JSON always has boot_time_s, so a key follows
+        data = b'{"timestamp":' + encode(foxglove_time(log_ns)) + b"," + data[1:]
+    return ("message", topic, log_ns, data, publish_ns, seq)
+
+
 # -- reading -----------------------------------------------------------------------------
 
 
@@ -629,6 +459,10 @@ def read_messages(path: str | os.PathLike[str], topics: Iterable[str] | None = N
                   ) -> Iterator[tuple[str, float, dict[str, Any]]]:
     """``(topic, log_time_s, payload)`` of a finished log, in log-time order.
 
+    ``log_time_s`` is vehicle time since boot, as it was given to ``Recorder.write``: the
+    payload's ``boot_time_s``, which is taken out of the payload, or the log time itself in a
+    log from before log times were UTC.
+
     Raises ``LogError`` at once for a file that is not MCAP or has no footer
     (a killed writer: run ``lrauv log recover``).
     """
@@ -651,7 +485,9 @@ def _iter_messages(path: Path, topics: list[str] | None) -> Iterator[tuple[str, 
                 if channel.message_encoding != "json":
                     raise LogError(f"{path}: {channel.topic}: message encoding {channel.message_encoding!r};"
                                    " only json is decoded here")
-                yield channel.topic, message.log_time / _NS_PER_S, json.loads(message.data)
+                payload = json.loads(message.data)
+                boot_s = payload.pop(BOOT_TIME_KEY, None)
+                yield channel.topic, message.log_time / NS_PER_S if boot_s is None else boot_s, payload
         except LogError:
             raise
         except Exception as exc:  # noqa: BLE001 - any failure inside a damaged file (mcap, zstd, json) names the file
@@ -670,10 +506,11 @@ class Recovery:
     output: str
     messages: int
     channels: int
-    last_log_time_s: float | None  # the latest (largest) log time recovered
+    last_log_time_s: float | None  # vehicle time (boot_time_s) of the message with the latest log time recovered
     complete: bool  # the source already ended with a valid footer
     truncated_at_byte: int | None  # end of the last complete record, when the source was cut
     chunks_dropped: int = 0  # complete chunk records whose contents failed CRC or decompression, or over the budget
+    last_utc_s: float | None = None  # that message's log time as Unix seconds, in a log with UTC log times
 
 
 def _default_output(src: Path) -> Path:
@@ -711,7 +548,7 @@ def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[s
     writer: Writer | None = None
     schema_ids: dict[int, int] = {0: 0}
     channel_ids: dict[int, int] = {}
-    messages, last_ns = 0, None
+    messages, last_ns, last_data = 0, None, b""
     for r in stream:
         if isinstance(r, Header):
             writer = Writer(out, chunk_size=1024 * 1024, compression=_COMPRESSION, enable_crcs=True)
@@ -725,7 +562,8 @@ def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[s
                 continue  # its Channel record was lost with a dropped chunk
             writer.add_message(channel_id, r.log_time, r.data, r.publish_time, r.sequence)
             messages += 1
-            last_ns = r.log_time if last_ns is None else max(last_ns, r.log_time)
+            if last_ns is None or r.log_time >= last_ns:
+                last_ns, last_data = r.log_time, r.data
         elif isinstance(r, Schema) and r.id not in schema_ids:
             schema_ids[r.id] = writer.register_schema(r.name, r.encoding, r.data)
         elif isinstance(r, Channel) and r.id not in channel_ids and r.schema_id in schema_ids:
@@ -738,10 +576,12 @@ def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[s
     if writer is None:
         raise LogError(f"{source}: truncated before the end of the MCAP header ({size} bytes); nothing to recover")
     writer.finish()
+    boot_s = None if last_ns is None else boot_time_of(last_data)
     return {
         "messages": messages,
         "channels": len(channel_ids),
-        "last_log_time_s": None if last_ns is None else last_ns / _NS_PER_S,
+        "last_log_time_s": None if last_ns is None else last_ns / NS_PER_S if boot_s is None else boot_s,
+        "last_utc_s": None if last_ns is None or boot_s is None else last_ns / NS_PER_S,
         "complete": stream.complete,
         "truncated_at_byte": None if stream.complete else stream.end_byte,
         "chunks_dropped": len(stream.damaged_chunks),

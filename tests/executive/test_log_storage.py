@@ -33,7 +33,7 @@ def test_a_full_disk_is_a_log_error_that_names_the_file(tmp_path):
 
 def test_in_the_background_a_full_disk_degrades_the_log_once_and_never_raises(tmp_path):
     path = _full(tmp_path)
-    rec = Recorder(path, background=True, max_queued_records=100)
+    rec = Recorder(path, background=True, max_queued_records=100, utc_offset_ns=0)  # no UTC to wait for
     assert wait_until(lambda: rec.degraded is not None, 10)  # the header's write failed
     for i in range(1000):  # none raises or waits: beyond the bound they are dropped and counted
         rec.write(Topic.STATE, float(i), {"time_s": float(i), "i": i})
@@ -51,7 +51,7 @@ def test_a_stalled_disk_drops_what_does_not_fit_and_says_so_when_it_writes_again
     os.mkfifo(path)
     reader = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     fcntl.fcntl(reader, fcntl.F_SETPIPE_SZ, 4096)
-    rec = Recorder(path, background=True, max_queued_records=50, chunk_size=1024)
+    rec = Recorder(path, background=True, max_queued_records=50, chunk_size=1024, utc_offset_ns=0)
     try:
         for i in range(2000):
             rec.write(Topic.STATE, float(i), {"time_s": float(i), "noise": os.urandom(64).hex()})

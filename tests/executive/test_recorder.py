@@ -46,15 +46,26 @@ def _messages(path: Path) -> list[tuple[str, int, int, int, bytes]]:
                 for _, c, m in make_reader(f, validate_crcs=True).iter_messages(log_time_order=False)]
 
 
+UTC0_NS = 1_700_000_000_250_000_000  # UTC of vehicle time 0 in the sample (Unix ns)
+GEOJSON = {Topic.MAP_GOALS: {"type": "Point", "coordinates": [-117.9, 33.7]},
+           Topic.MAP_GEOFENCE: {"type": "Polygon", "coordinates": [[[-118.5, 33.5], [-117.5, 33.5], [-117.5, 34.0],
+                                                                   [-118.5, 33.5]]]},
+           Topic.MAP_PLAN: {"type": "FeatureCollection", "features": []}}
+
+
 def _write_sample(path: Path) -> None:
-    with Recorder(path, metadata={"executive": {"table": "demo.lrpt", "link": "udpout:127.0.0.1:14560"}}) as rec:
+    with Recorder(path, metadata={"executive": {"table": "demo.lrpt", "link": "udpout:127.0.0.1:14560"}},
+                  utc_offset_ns=UTC0_NS) as rec:
         rec.metadata("mission", {"name": "demo"})
         rec.attach("policy-0badf00d.lrpt", b"LRPT\x00\x01policy bytes", log_time_s=0.0)
-        rec.location_fix(10.0, lat_deg=33.6, lon_deg=-118.4, depth_m=20.0, unix_time_s=1_700_000_000.25)
+        rec.location_fix(10.0, lat_deg=33.6, lon_deg=-118.4, depth_m=20.0, heading_deg=-90.0,
+                         velocity_enu_m_s=(0.5, -1.0, 0.25))
         for i, level in enumerate(("debug", "info", "warning", "error")):
             rec.log(11.0 + i, level, f"a {level} line")
         for i, (topic, payload) in enumerate(PAYLOADS.items()):
             rec.write(topic, 20.0 + i, payload, publish_time_s=1_700_000_100.0)
+        for i, (topic, layer) in enumerate(GEOJSON.items()):
+            rec.geojson(topic, 30.0 + i, layer)
 
 
 # -- writing and reading back ------------------------------------------------------------
@@ -71,31 +82,39 @@ def test_a_log_reads_back_with_the_official_reader(tmp_path):
         schemas = {s.name: s for s in summary.schemas.values()}
         assert {"foxglove.LocationFix", "foxglove.Log"} <= set(schemas)
         assert all(s.encoding == "jsonschema" for s in schemas.values())
-        assert len(schemas) == 7  # the two MAVLink channels share lrauv.MavlinkMessage
+        assert len(schemas) == 8  # the MAVLink channels share lrauv.MavlinkMessage, the map layers foxglove.GeoJSON
         assert all(c.message_encoding == "json" for c in summary.channels.values())
-        assert summary.statistics.message_count == 1 + 4 + len(PAYLOADS)
-        assert summary.statistics.channel_count == 2 + len(PAYLOADS)
-        assert summary.statistics.attachment_count == 1 and summary.statistics.metadata_count == 2
+        assert summary.statistics.message_count == 1 + 4 + len(PAYLOADS) + len(GEOJSON)
+        assert summary.statistics.channel_count == 2 + len(PAYLOADS) + len(GEOJSON)
+        assert summary.statistics.attachment_count == 1 and summary.statistics.metadata_count == 3
         decoded = [(c.topic, s.name, m.log_time, json.loads(m.data)) for s, c, m in reader.iter_messages()]
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
         attachments = list(reader.iter_attachments())
 
     topic, schema_name, log_time, fix = decoded[0]
-    assert (topic, schema_name, log_time) == ("/vehicle/fix", "foxglove.LocationFix", 10_000_000_000)
+    # Log time and timestamp: UTC (vehicle time + the clock's offset); the vehicle time in boot_time_s.
+    assert (topic, schema_name, log_time) == ("/vehicle/fix", "foxglove.LocationFix", UTC0_NS + 10_000_000_000)
+    assert fix["timestamp"] == {"sec": 1_700_000_010, "nsec": 250_000_000} and fix["boot_time_s"] == 10.0
     assert fix["latitude"] == 33.6 and fix["longitude"] == -118.4 and fix["altitude"] == -20.0
-    assert fix["timestamp"] == {"sec": 1_700_000_000, "nsec": 250_000_000}
     assert fix["position_covariance"] == [0.0] * 9 and fix["position_covariance_type"] == 0
-    assert set(fix) <= set(json.loads(schemas["foxglove.LocationFix"].data)["properties"])  # standard fields only
+    assert fix["heading"] == pytest.approx(math.radians(270.0))  # radians clockwise from north, in [0, 2 pi)
+    assert fix["velocity"] == {"x": 0.5, "y": -1.0, "z": 0.25}  # east, north, up
+    assert set(fix) - {"boot_time_s"} <= set(json.loads(schemas["foxglove.LocationFix"].data)["properties"])
     logs = [p for t, _, _, p in decoded if t == "/log"]
     assert [(p["level"], p["message"]) for p in logs] == [
         (1, "a debug line"), (2, "a info line"), (3, "a warning line"), (4, "a error line")]
-    assert all(p["name"] == "executive" for p in logs)
+    assert all(p["name"] == "executive" and p["file"] == "" and p["line"] == 0 for p in logs)
     by_topic = {t: p for t, _, _, p in decoded}
-    assert by_topic["/vehicle/state"] == STATE
+    assert by_topic["/vehicle/state"] == {**STATE, "boot_time_s": 20.0}
+    for i, (topic, layer) in enumerate(GEOJSON.items()):  # the GeoJSON as text, as foxglove.GeoJSON has it
+        assert json.loads(by_topic[topic.value]["geojson"]) == layer
+        assert by_topic[topic.value]["timestamp"] == {"sec": 1_700_000_030 + i, "nsec": 250_000_000}
     assert metadata == {"executive": {"table": "demo.lrpt", "link": "udpout:127.0.0.1:14560"},
-                        "mission": {"name": "demo"}}
-    assert [(a.name, a.media_type, a.data) for a in attachments] == [
-        ("policy-0badf00d.lrpt", "application/octet-stream", b"LRPT\x00\x01policy bytes")]
+                        "mission": {"name": "demo"},
+                        "clock": {"log_time": metadata["clock"]["log_time"], "source": "given",
+                                  "utc_offset_ns": str(UTC0_NS), "held_records": "0", "changes": "0"}}
+    assert [(a.name, a.media_type, a.data, a.log_time) for a in attachments] == [
+        ("policy-0badf00d.lrpt", "application/octet-stream", b"LRPT\x00\x01policy bytes", UTC0_NS)]
 
 
 def test_custom_schemas_are_json_and_every_payload_has_the_required_keys(tmp_path):
@@ -112,7 +131,7 @@ def test_custom_schemas_are_json_and_every_payload_has_the_required_keys(tmp_pat
             payload = json.loads(message.data)
             required = written[schema.name].get("required", [])
             assert set(required) <= set(payload), (channel.topic, set(required) - set(payload))
-    assert {t for t in PAYLOADS} | {Topic.FIX, Topic.LOG} == set(Topic)
+    assert {t for t in PAYLOADS} | {Topic.FIX, Topic.LOG} | set(GEOJSON) == set(Topic)
 
 
 class Color(Enum):
@@ -166,8 +185,9 @@ def test_log_time_may_go_backwards(tmp_path):
     with Recorder(path) as rec:
         for t in (100.0, 101.0, 3.0, -1.0, 4.0):  # an autopilot reboot, then a clock glitch below zero
             rec.write(Topic.STATE, t, {"time_s": t})
-        assert rec.messages_written == 5
-    assert [t for _, t, _ in read_messages(path)] == [0.0, 3.0, 4.0, 100.0, 101.0]
+    assert rec.messages_written == 5
+    # read_messages gives vehicle time (boot_time_s); ordered by log time, UTC (here the host's clock)
+    assert [t for _, t, _ in read_messages(path)] == [-1.0, 3.0, 4.0, 100.0, 101.0]
     assert [s for _, _, _, s, _ in _messages(path)] == [0, 1, 2, 3, 4]  # per-channel sequence
 
 
@@ -180,7 +200,7 @@ def test_read_messages_filters_topics(tmp_path):
 
 def test_maybe_flush_follows_the_wall_clock_interval(tmp_path):
     path = tmp_path / "flush.mcap"
-    rec = Recorder(path, flush_interval_s=1.0)
+    rec = Recorder(path, flush_interval_s=1.0, utc_offset_ns=UTC0_NS)
     t0 = time.monotonic()
     size0 = rec.bytes_written
     rec.write(Topic.STATE, 1.0, STATE)
@@ -197,7 +217,7 @@ def test_maybe_flush_follows_the_wall_clock_interval(tmp_path):
 WRITER = textwrap.dedent("""
     import sys
     from executive.recorder import Recorder, Topic
-    rec = Recorder(sys.argv[1], chunk_size=2048, flush_interval_s=0)
+    rec = Recorder(sys.argv[1], chunk_size=2048, flush_interval_s=0, utc_offset_ns=1_700_000_000 * 10**9)
     print("ready", flush=True)
     i = 0
     while True:
@@ -244,7 +264,8 @@ def test_a_killed_writer_leaves_a_recoverable_log(tmp_path):
     assert len(messages) == result.messages
     state_times = [t for topic, t, _, _, _ in messages if topic == "/vehicle/state"]
     assert state_times == sorted(state_times) and len(set(state_times)) == len(state_times)
-    assert result.last_log_time_s == state_times[-1] / 1e9
+    assert result.last_utc_s == state_times[-1] / 1e9  # the latest log time, UTC
+    assert result.last_log_time_s == (state_times[-1] - 1_700_000_000 * 10**9) / 1e9  # its vehicle time
     with open(result.output, "rb") as f:
         assert make_reader(f).get_summary().statistics.message_count == result.messages
     assert len(list(read_messages(result.output))) == result.messages
@@ -256,7 +277,8 @@ def test_recovering_a_complete_log_is_a_faithful_copy(tmp_path):
     out = tmp_path / "copy.mcap"
     result = recover(path, out)
     assert result.complete and result.truncated_at_byte is None and result.chunks_dropped == 0
-    assert result.messages == 1 + 4 + len(PAYLOADS) and result.channels == 2 + len(PAYLOADS)
+    assert result.messages == 1 + 4 + len(PAYLOADS) + len(GEOJSON)
+    assert result.channels == 2 + len(PAYLOADS) + len(GEOJSON)
     assert _messages(out) == _messages(path)
     with open(path, "rb") as a, open(out, "rb") as b:
         ra, rb = make_reader(a), make_reader(b)
@@ -296,7 +318,7 @@ def test_every_cut_of_a_log_recovers_a_prefix(tmp_path):
 
 def test_a_damaged_chunk_is_dropped_and_the_rest_kept(tmp_path):
     path = tmp_path / "run.mcap"
-    with Recorder(path, chunk_size=512) as rec:
+    with Recorder(path, chunk_size=512, utc_offset_ns=0) as rec:  # log time = vehicle time
         for i in range(60):
             rec.write(Topic.STATE, float(i), {"time_s": float(i), "i": i})
     with open(path, "rb") as f:

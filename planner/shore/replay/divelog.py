@@ -7,8 +7,10 @@ last complete record, and ``DiveLog`` says where it ends. Each payload is checke
 against its topic's schema as it is read (``planner.shore.replay.payloads``): a
 wrong type or a missing key is a ``LogError`` naming the file, the message and
 the key, never a crash further on. Messages come in file order, which is the order
-the executive did things in (log times are vehicle time and may step back at a
-reboot). Channels this version does not know are counted and skipped, never
+the executive did things in. Each message's time is vehicle time since boot: its
+payload's ``boot_time_s`` in a log whose log times are UTC (``executive.log_clock``),
+the log time itself in an older log (vehicle time then); it may step back at a
+reboot. Channels this version does not know are counted and skipped, never
 guessed at.
 
 Standard library, ``mcap`` and the executive's own modules, like the recorder.
@@ -26,9 +28,10 @@ from typing import Any, BinaryIO
 from mcap.records import Attachment, Channel, Header, Message, Metadata
 
 from executive.helm import HelmConfig
+from executive.log_records import BoundedRecords
+from executive.log_topics import BOOT_TIME_KEY, boot_time_of
 from executive.recorder import LogError, Topic, check_head, is_complete
 from planner.shore.replay.payloads import PayloadError, check_fields, check_payload
-from executive.log_records import BoundedRecords
 from planner.contract.progress import SILENT, Progress
 
 __all__ = ["DiveLog", "LogMessage", "open_dive"]
@@ -43,9 +46,10 @@ class LogMessage:
     """One message of a known topic, decoded."""
 
     topic: Topic
-    log_time_s: float  # vehicle time since boot
+    log_time_s: float  # vehicle time since boot (the payload's boot_time_s, or an old log's log time)
     publish_time_s: float  # wall clock (Unix seconds) when it was written
     payload: dict[str, Any]
+    utc_s: float | None = None  # the log time as Unix seconds, in a log whose log times are UTC; else None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,14 +66,20 @@ class DiveLog:
     unreadable_inside: bool  # reading stopped at end_byte, yet the file ends with its footer: damage, not a cut
     counts: Mapping[Topic, int]  # messages per known topic
     unknown: Mapping[str, int]  # messages on topics (or encodings) this version does not read
-    first_log_time_s: float | None
-    last_log_time_s: float | None
+    first_log_time_s: float | None  # vehicle time of the first message in the file
+    last_log_time_s: float | None  # and of the last
     metadata: Mapping[str, Mapping[str, str]]
     attachments: Mapping[str, bytes]
 
     @property
     def n_messages(self) -> int:
         return sum(self.counts.values())
+
+    @property
+    def clock(self) -> str:
+        """What the log times are: UTC and where it came from (metadata ``clock``), or vehicle time (older logs)."""
+        source = self.metadata.get("clock", {}).get("source")
+        return "vehicle time since boot" if source is None else f"UTC ({source})"
 
     def where_it_ends(self) -> str:
         """One line for the operator: complete, or where the cut is; and any damaged chunk."""
@@ -118,13 +128,17 @@ class DiveLog:
             where = f"{self.path}: {channel.topic} message {message.sequence} (log time {t:.3f} s)"
             try:
                 payload = check_payload(topic, json.loads(message.data), keep_undecodable=keep_undecodable)
+                boot_s = payload.pop(BOOT_TIME_KEY, None)  # lifted out: the payload is what the executive logged
             except RecursionError:
                 raise LogError(f"{where}: JSON nested too deeply to read") from None
             except PayloadError as exc:
                 raise LogError(f"{where}: {exc}") from None
             except ValueError as exc:
                 raise LogError(f"{where}: not JSON ({exc})") from None
-            yield LogMessage(topic, t, message.publish_time / _NS_PER_S, payload)
+            if boot_s is None:  # a log from before UTC log times: the log time is vehicle time
+                yield LogMessage(topic, t, message.publish_time / _NS_PER_S, payload)
+            else:
+                yield LogMessage(topic, boot_s, message.publish_time / _NS_PER_S, payload, t)
 
 
 def open_dive(path: str | os.PathLike[str], *, meter: Progress = SILENT) -> DiveLog:
@@ -141,7 +155,9 @@ def open_dive(path: str | os.PathLike[str], *, meter: Progress = SILENT) -> Dive
     attachments: dict[str, bytes] = {}
     channels: dict[int, tuple[Topic | None, str]] = {}
     header: Header | None = None
-    first = last = None
+    first: float | None = None
+    last_ns: int | None = None
+    last_data = b""
     with _open(p) as f:
         size = os.fstat(f.fileno()).st_size
         stream = BoundedRecords(f, size, p)
@@ -159,9 +175,9 @@ def open_dive(path: str | os.PathLike[str], *, meter: Progress = SILENT) -> Dive
                 counts[topic] = counts.get(topic, 0) + 1
                 if counts[topic] % _TICK_EVERY == 0:
                     meter.update("reading the log", min(f.tell(), size), size, unit="B")
-                t = r.log_time / _NS_PER_S
-                first = t if first is None else first
-                last = t
+                if first is None:
+                    first = _vehicle_time(r.log_time, r.data)
+                last_ns, last_data = r.log_time, r.data
             elif isinstance(r, Metadata):
                 metadata[r.name] = dict(r.metadata)
             elif isinstance(r, Attachment):
@@ -176,12 +192,19 @@ def open_dive(path: str | os.PathLike[str], *, meter: Progress = SILENT) -> Dive
         raise LogError(f"{p}: no lrauv executive channel in this MCAP file (library {header.library!r});"
                        f" expected topics like {Topic.DECISION.value}; channels seen: {seen}")
     _check_helm(p, metadata.get("helm"))
+    last = None if last_ns is None else _vehicle_time(last_ns, last_data)
     meter.update("reading the log", size, size, unit="B")
     return DiveLog(path=p, size_bytes=size, library=header.library, profile=header.profile, complete=stream.complete,
                    end_byte=size if stream.complete else stream.end_byte, damaged_chunks=tuple(stream.damaged_chunks),
                    unreadable_inside=not stream.complete and is_complete(p),
                    counts=counts, unknown=unknown, first_log_time_s=first, last_log_time_s=last, metadata=metadata,
                    attachments=attachments)
+
+
+def _vehicle_time(log_ns: int, data: bytes) -> float:
+    """A message's vehicle time, without decoding it all: ``boot_time_s``, or an old log's log time."""
+    boot_s = boot_time_of(data)
+    return log_ns / _NS_PER_S if boot_s is None else boot_s
 
 
 def _open(p: Path) -> BinaryIO:

@@ -27,6 +27,7 @@ from functools import cache
 from typing import Any
 
 from executive import mavlink_bridge as bridge
+from executive.log_topics import ADDED_LATER
 from executive.recorder import Topic
 
 __all__ = ["PayloadError", "check_fields", "check_payload", "mavlink_value"]
@@ -176,7 +177,8 @@ _PLAIN = {"string": str, "boolean": bool, "null": type(None), "object": dict, "a
 
 @cache
 def _compiled(topic: Topic) -> Callable[[Any], None]:
-    return _compile(topic.schema)
+    later = ADDED_LATER.get(topic, ())  # required now, absent from older logs
+    return _compile({**topic.schema, "required": [k for k in topic.required if k not in later]})
 
 
 def _compile(schema: Mapping[str, Any]) -> Callable[[Any], None]:

@@ -8,12 +8,14 @@ out in file order, both directions, as they were on the wire (MAVLink 1 or 2, si
 the autopilot's streams the executive only counts (``executive.raw_log``) were never logged,
 so they are not here either.
 
-The time: UTC where the log knows it, i.e. vehicle time (the record's log time) plus the offset
-from the autopilot's SYSTEM_TIME (``time_unix_usec`` - ``time_boot_ms``), the first one's for the
-frames before it and each later one's from there on (a reboot restarts vehicle time); else vehicle
-time since boot (a 1970 date). Log times are not monotonic in file order (the executive's
-extrapolated clock runs ahead, a reboot steps back), and tools expect a .tlog's time not to go
-back, so a frame never gets an earlier time than the one before it.
+The time: the record's log time where it is UTC (``executive.log_clock``: the autopilot's
+SYSTEM_TIME, or the host's clock where none came, as the log's ``clock`` metadata says). In an
+older log, whose log times are vehicle time, UTC where the log knows it: vehicle time plus the
+offset from the autopilot's SYSTEM_TIME (``time_unix_usec`` - ``time_boot_ms``), the first one's
+for the frames before it and each later one's from there on (a reboot restarts vehicle time);
+else vehicle time since boot (a 1970 date). Log times are not monotonic in file order (the
+executive's extrapolated clock runs ahead, a reboot steps back), and tools expect a .tlog's time
+not to go back, so a frame never gets an earlier time than the one before it.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from planner.shore.replay.divelog import DiveLog
 
 __all__ = ["TlogResult", "write_tlog"]
 
-TlogClock = Literal["utc", "vehicle time since boot"]
+TlogClock = Literal["utc", "utc (host clock)", "vehicle time since boot"]
 _STAMP = struct.Struct(">Q")  # microseconds since the Unix epoch, big-endian (MAVProxy, QGC, pymavlink)
 
 
@@ -55,19 +57,22 @@ class TlogResult:
 def write_tlog(log: DiveLog, path: str | os.PathLike[str], *, first_offset_s: float | None = None) -> TlogResult:
     """Write ``log``'s MAVLink frames to ``path`` as a .tlog, atomically.
 
-    ``first_offset_s``: the log's first SYSTEM_TIME offset (``Dive.unix_offset_s``), for the frames
-    before that message; found here when not given. Raises ``LogError`` for a log that holds no
+    ``first_offset_s``: for an older log (vehicle log times), its first SYSTEM_TIME offset
+    (``Dive.unix_offset_s``) for the frames before that message; found here when not given. Raises ``LogError`` for a log that holds no
     frames (written before they were kept) or a frame that is not base64; ``path`` is then untouched.
     """
-    if first_offset_s is None:
+    source = log.metadata.get("clock", {}).get("source")
+    if source is None and first_offset_s is None:
         first_offset_s = _first_offset_s(log)
-    counts = {"frames": 0, "without": 0}
+    counts = {"frames": 0, "without": 0, "utc": 0}
     with atomic_target(path) as tmp, open(tmp, "wb") as out:
         for stamp_us, frame in _stamped_frames(log, first_offset_s, counts):
             out.write(_STAMP.pack(stamp_us))
             out.write(frame)
-    return TlogResult(path=Path(path), frames=counts["frames"], without_frame=counts["without"],
-                      clock="vehicle time since boot" if first_offset_s is None else "utc")
+    clock: TlogClock = "vehicle time since boot" if first_offset_s is None and not counts["utc"] else "utc"
+    if counts["utc"] and source == "host clock":
+        clock = "utc (host clock)"
+    return TlogResult(path=Path(path), frames=counts["frames"], without_frame=counts["without"], clock=clock)
 
 
 def _stamped_frames(log: DiveLog, offset_s: float | None, counts: dict[str, int]) -> Iterator[tuple[int, bytes]]:
@@ -85,7 +90,11 @@ def _stamped_frames(log: DiveLog, offset_s: float | None, counts: dict[str, int]
         except (binascii.Error, ValueError):
             raise LogError(f"{log.path}: {m.topic.value} {p['name']} at log time {m.log_time_s:.3f} s: its frame is"
                            " not base64") from None
-        last_us = max(last_us, round((m.log_time_s + (offset_s or 0.0)) * 1e6))
+        if m.utc_s is not None:  # a log with UTC log times
+            counts["utc"] += 1
+            last_us = max(last_us, round(m.utc_s * 1e6))
+        else:
+            last_us = max(last_us, round((m.log_time_s + (offset_s or 0.0)) * 1e6))
         counts["frames"] += 1
         yield last_us, frame
     if counts["frames"] == 0:  # raised inside the atomic write: no empty file is left behind

@@ -29,7 +29,7 @@ from planner.cli import main as lrauv
 from planner.shore.replay.divelog import open_dive
 from planner.shore.replay.tlog import write_tlog
 
-from tests.planner.shore.mcap_logs import rewrite_log
+from tests.planner.shore.mcap_logs import as_old_format, rewrite_log
 
 _MAVLINK_TOPICS = (Topic.MAVLINK_RX.value, Topic.MAVLINK_TX.value)
 
@@ -123,9 +123,12 @@ def test_mavlogdump_lists_the_messages(dive_log, tlog):
     assert any(f"lat : {position['fields']['lat']}," in line for line in lines)
 
 
-def _frames_log(path: Path, utc: bool) -> Path:
+def _frames_log(path: Path, utc: bool, *, old: bool = True) -> Path:
     """A small log of real frames (``describe`` of packed messages): SYSTEM_TIME after a first heartbeat,
-    a message behind the newest log time, a reboot (vehicle time back near zero) and a later SYSTEM_TIME."""
+    a message behind the newest log time, a reboot (vehicle time back near zero) and a later SYSTEM_TIME.
+
+    ``old``: in the format of logs whose log times were vehicle time (``as_old_format``); else as the
+    executive writes them now, its clock set by each SYSTEM_TIME as the loop does."""
     mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
 
     def packed(msg: Any) -> dict[str, Any]:
@@ -141,18 +144,42 @@ def _frames_log(path: Path, utc: bool) -> Path:
 
     heartbeat = packed(mavlink.MAVLink_heartbeat_message(12, 3, 0, 0, 4, 3))
     rx = Topic.MAVLINK_RX
-    with Recorder(path) as rec:
+    new = path.with_name(f"new-{path.name}") if old else path
+    with Recorder(new, utc_offset_ns=0 if old else None) as rec:
         for t, payload in ((5.0, heartbeat), (10.0, system_time(UNIX_S + 10.0, 10.0)), (11.0, position(11.0)),
                            (10.5, position(10.5)), (1.0, position(1.0)), (2.0, system_time(UNIX_S + 100.0, 2.0)),
                            (3.0, position(3.0))):
+            if payload["name"] == "SYSTEM_TIME" and not old:  # before its own record is written, as the loop does
+                rec.system_time(payload["fields"]["time_unix_usec"], t)
             rec.write(rx, t, payload)
-    return path
+    return as_old_format(new, path) if old else path
 
 
 UNIX_S = 1_780_000_000.0  # 2026-05-28
 
 
-def test_frames_are_at_utc_from_each_system_time_and_never_step_back(tmp_path):
+def test_frames_are_at_their_utc_log_time_and_never_step_back(tmp_path):
+    result = write_tlog(open_dive(_frames_log(tmp_path / "utc.mcap", utc=True, old=False)), tmp_path / "utc.tlog")
+    assert (result.frames, result.without_frame, result.clock) == (7, 0, "utc")
+    stamps = [m._timestamp for m in _read_back(result.path)]
+    # The log's own times: the heartbeat held until the first SYSTEM_TIME, then dated with its offset; 10.5 s
+    # and the reboot's 1 s (the last offset goes on until the next SYSTEM_TIME) held at 11 s; the second
+    # SYSTEM_TIME's offset (98 s later in UTC than vehicle time says) from there on.
+    expected = [UNIX_S + t for t in (5.0, 10.0, 11.0, 11.0, 11.0, 100.0, 101.0)]
+    assert stamps == pytest.approx(expected, abs=1e-6)
+
+
+def test_without_the_autopilots_utc_the_tlog_is_at_the_host_clock(tmp_path):
+    before = time.time()
+    result = write_tlog(open_dive(_frames_log(tmp_path / "host.mcap", utc=False, old=False)), tmp_path / "host.tlog")
+    assert result.clock == "utc (host clock)"
+    stamps = [m._timestamp for m in _read_back(result.path)]
+    # the host's clock at the log's close stood for its newest vehicle time, 11 s: the first frame was 6 s before
+    assert before - 6.0 - 1e-6 <= stamps[0] <= time.time() - 6.0 + 1e-6
+    assert stamps == sorted(stamps)
+
+
+def test_an_old_logs_frames_are_at_utc_from_each_system_time(tmp_path):
     result = write_tlog(open_dive(_frames_log(tmp_path / "utc.mcap", utc=True)), tmp_path / "utc.tlog")
     assert (result.frames, result.without_frame, result.clock) == (7, 0, "utc")
     stamps = [m._timestamp for m in _read_back(result.path)]
@@ -162,7 +189,7 @@ def test_frames_are_at_utc_from_each_system_time_and_never_step_back(tmp_path):
     assert stamps == pytest.approx(expected, abs=1e-6)
 
 
-def test_without_the_autopilots_utc_the_tlog_is_in_vehicle_time(tmp_path):
+def test_without_the_autopilots_utc_an_old_logs_tlog_is_in_vehicle_time(tmp_path):
     result = write_tlog(open_dive(_frames_log(tmp_path / "boot.mcap", utc=False)), tmp_path / "boot.tlog")
     assert result.clock == "vehicle time since boot"
     assert "7 MAVLink frames, time vehicle time since boot" == result.describe()
