@@ -183,6 +183,7 @@ class Executive(PlanChanges, StationLink):
         self.recorder.metadata("helm", {"config": self.helm_config.to_json(),
                                         "goal_index": str(self.plan.index if self.plan is not None else 0),
                                         "safety_stop": "" if safety_stop is None else safety_stop.value})
+        self._record_map(0.0, geofence=True)  # goals, geofence and running plan on Foxglove's map
         self._blobs: dict[int, bytes] = {}  # every table's exact bytes, for the durable state
         # Off the decision path (executive.state_writer): a slow or full disk never holds up a decision.
         self.state_writer = None if config.state_dir is None else StateWriter(config.state_dir)
@@ -427,6 +428,7 @@ class Executive(PlanChanges, StationLink):
             self._event(now_s, event)
         if kind == "SYSTEM_TIME":
             self._unix_offset_s = bridge.unix_offset_s(msg) or self._unix_offset_s
+            self.recorder.system_time(msg.time_unix_usec, t_boot)  # the log's UTC (executive.log_clock)
         if kind in ("COMMAND_ACK", "STATUSTEXT"):
             level: LogLevelName = "info" if kind == "STATUSTEXT" and msg.severity > 4 else "warning"
             if kind == "COMMAND_ACK" and msg.result == 0:
@@ -436,7 +438,7 @@ class Executive(PlanChanges, StationLink):
             else:
                 self._event(now_s, Event(level, bridge.command_text(msg)))
         if kind == "GLOBAL_POSITION_INT":
-            self._log(self._record_state, now_s, self.vehicle)
+            self._log(self._record_state, now_s, self.vehicle, msg)
         if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
             self._tick(now_s if t_boot is None else t_boot, link_ok=True)
             return kind in bridge.DECISION_MESSAGES
@@ -547,10 +549,13 @@ class Executive(PlanChanges, StationLink):
             if self.gcs is not None:
                 self._send_on(self.gcs_mav, now_s, bridge.statustext(self.gcs_mav, event))
 
-    def _record_state(self, now_s: float, v: VehicleState) -> None:
+    def _record_state(self, now_s: float, v: VehicleState, msg: Any = None) -> None:
         lat, lon, depth = v.lat_deg, v.lon_deg, v.depth_m
         if lat is not None and lon is not None and depth is not None:  # VehicleState.has_position, narrowed
-            self.recorder.location_fix(now_s, lat_deg=lat, lon_deg=lon, depth_m=depth)
+            # GLOBAL_POSITION_INT's ground velocity is NED in cm/s; LocationFix's is ENU in m/s.
+            velocity = None if msg is None else (msg.vy / 100.0, msg.vx / 100.0, -msg.vz / 100.0)
+            self.recorder.location_fix(now_s, lat_deg=lat, lon_deg=lon, depth_m=depth, heading_deg=v.heading_deg,
+                                       velocity_enu_m_s=velocity)
         self.recorder.write(Topic.STATE, now_s, {name: getattr(v, name) for name in _STATE_FIELDS})
 
     def _record_policy(self, table: PolicyTable, table_bytes: bytes | None, reason: str, *, now_s: float = 0.0,

@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from executive import envelope, goal_tables, timeline
+from executive import envelope, goal_tables, map_layers, timeline
 from executive.clock import VehicleClock
 from executive.goal_tables import MissionPlan
 from executive.helm import HelmConfig, HelmState, swapped
@@ -104,10 +104,19 @@ class PlanChanges:
                 record["slices"] = timeline.slices_record(new.table)
         self.swaps.append(record)
         self._log(self.recorder.write, Topic.POLICY, now_s, record)
+        self._log(self._record_map, now_s)
         self._log(self._save_state, now_s)  # after this decision's commands are out
         prev = record["previous"]["table_crc32"]
         self._event(now_s, Event("info", f"plan swapped ({note.get('source', '?')}): goal {new.index},"
                                          f" table {prev} -> {record['table_crc32']}"))
+
+    def _record_map(self, now_s: float, *, geofence: bool = False) -> None:
+        """The mission on Foxglove's map (``executive.map_layers``): the goals and the running plan, each
+        replacing its last; the geofence once (``geofence``), as the mission's safety section never changes."""
+        if geofence:
+            self.recorder.geojson(Topic.MAP_GEOFENCE, now_s, map_layers.geofence_layer(self.config.helm.geofence))
+        self.recorder.geojson(Topic.MAP_GOALS, now_s, map_layers.goals_layer(self.plan))
+        self.recorder.geojson(Topic.MAP_PLAN, now_s, map_layers.plan_layer(self.plan))
 
     def _refuse(self, now_s: float, what: str, reason: str, table: PolicyTable | None = None, *,
                 notify: bool = True) -> str:

@@ -42,5 +42,6 @@ def run(args: argparse.Namespace) -> int:
     picture = draw_track(args.table, result.track_csv, args.out / "pictures" / "track.png", truth=args.truth)
     print(f"track      {result.track_csv}")
     print(f"picture    {picture}")
+    print(f"layout     {result.layout_path} (Foxglove: Layouts, Import from file; then open {result.log_path})")
     print(f"demo       {result.wall_s:.1f} s wall in all")
     return result.exec_status

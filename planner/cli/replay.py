@@ -38,6 +38,8 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     p.add_argument("--gpx", type=Path, help="write the track as GPX 1.1")
     p.add_argument("--tlog", type=Path, metavar="OUT.tlog",
                    help="write the logged MAVLink frames as a telemetry log (.tlog: mavlogdump.py, MAVExplorer, QGC)")
+    p.add_argument("--layout", type=Path, metavar="OUT.json",
+                   help="write a Foxglove layout for the log (map, log, depth and battery plot, states, raw messages)")
     p.add_argument("--no-audit", action="store_true", help="skip running the decisions again")
     p.add_argument("--mavlink", metavar="ADDRESS",
                    help="re-send the recorded telemetry as MAVLink to this pymavlink address (e.g. udpout:127.0.0.1:14550)")
@@ -109,6 +111,10 @@ def _replay(args: argparse.Namespace) -> int:
         tlog = write_tlog(log, args.tlog, first_offset_s=dive.unix_offset_s)
         print(f"tlog       {tlog.describe()}")
         written.append(tlog.path)
+    if args.layout is not None:
+        from planner.shore.replay.layout import write_layout
+
+        written.append(write_layout(args.layout))
     if args.report is not None:
         from planner.shore.replay.report import write_report
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from planner.contract.progress import SILENT, Progress
 from planner.contract.table import PolicyTable
+from planner.shore.replay.layout import write_layout
 from planner.shore.replay.track_filter import path_length_m
 from vehicle_sim.cli import wait_ready
 
@@ -34,6 +35,7 @@ class DemoResult:
     track_csv: Path
     log_path: Path
     wall_s: float
+    layout_path: Path | None = None  # the Foxglove layout written beside the log
 
 
 def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: str, depth_m: float, heading_deg: float,
@@ -66,7 +68,9 @@ def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: st
     finally:
         for proc in (ex, sim):
             stop_process(proc)
-    return DemoResult(exec_status=status, exec_output=output, track_csv=track, log_path=log, wall_s=time.monotonic() - t0)
+    layout = write_layout(out / "demo.foxglove-layout.json")  # open demo.mcap in Foxglove with it
+    return DemoResult(exec_status=status, exec_output=output, track_csv=track, log_path=log, wall_s=time.monotonic() - t0,
+                      layout_path=layout)
 
 
 class TrackWatch:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import subprocess
 from pathlib import Path
@@ -44,8 +45,8 @@ pytestmark = [
 ]
 
 NS = 1_000_000_000
-T0 = 1_700_000_000  # Unix seconds of the first publish time
-STEPS = 120  # one message per topic and step (policy every 25 steps)
+T0 = 1_700_000_000  # Unix seconds of the first publish time, and the UTC of vehicle time 0 (the log times)
+STEPS = 120  # one message per topic and step (policy every 25 steps, map layers every 40)
 CHUNK_SIZE = 2048  # small chunks: the log has dozens of them
 ATTACHMENT = ("policy-0badf00d.lrpt", bytes(range(256)) * 9 + b"LRPT tail", "application/x-lrauv-policy")
 METADATA = {"executive": {"table": "demo.lrpt", "link": "udpout:127.0.0.1:14560"},
@@ -95,8 +96,8 @@ def _node_texts(report: dict[str, Any]) -> list[tuple[str, int, int, int, str]]:
 def _write_log(path: Path) -> list[dict[str, Any]]:
     """A log on every topic; returns the messages as written (payloads as JSON gives them back), in order.
 
-    Each message has its own log time (n * 0.125 s, exact in binary) and
-    publish time, so log-time order is write order.
+    Each message has its own vehicle time (n * 0.125 s, exact in binary), so its own UTC log
+    time (T0 + that) and publish time, and log-time order is write order.
     """
     expected: list[dict[str, Any]] = []
     sequence: dict[Topic, int] = {}
@@ -111,28 +112,36 @@ def _write_log(path: Path) -> list[dict[str, Any]]:
         seq = sequence.get(topic, 0)
         sequence[topic] = seq + 1
         # In integers: a Unix time in float nanoseconds would be off by up to 128 ns.
-        expected.append({"topic": topic.value, "log_time": n * NS // 8, "publish_time": T0 * NS + n * NS // 4,
-                         "sequence": seq, "payload": payload})
+        expected.append({"topic": topic.value, "log_time": T0 * NS + n * NS // 8, "publish_time": T0 * NS + n * NS // 4,
+                         "sequence": seq, "payload": {**payload, "boot_time_s": n * 0.125}})
 
-    with Recorder(path, chunk_size=CHUNK_SIZE, metadata={"executive": METADATA["executive"]}) as rec:
+    def timestamp() -> dict[str, int]:  # the Foxglove timestamp of the last stamp(): its log time
+        return {"sec": T0 + n // 8, "nsec": n % 8 * NS // 8}
+
+    with Recorder(path, chunk_size=CHUNK_SIZE, metadata={"executive": METADATA["executive"]},
+                  utc_offset_ns=T0 * NS) as rec:
         rec.metadata("mission", METADATA["mission"])
         name, data, media_type = ATTACHMENT
         rec.attach(name, data, media_type=media_type, log_time_s=0.5)
         for i in range(STEPS):
             lat, lon, depth = 33.5 + i * 1e-4, -118.1 + i * 2.5e-4, float(i % 16)
             t, u = stamp()
-            rec.location_fix(t, lat_deg=lat, lon_deg=lon, depth_m=depth, unix_time_s=u)
-            sec, frac = T0 + n // 4, n % 4 * NS // 4
-            add(Topic.FIX, {"timestamp": {"sec": sec, "nsec": frac}, "frame_id": "vehicle", "latitude": lat,
-                                  "longitude": lon, "altitude": -depth, "position_covariance": [0.0] * 9,
-                                  "position_covariance_type": 0})
+            rec.location_fix(t, lat_deg=lat, lon_deg=lon, depth_m=depth, heading_deg=i * 3.0, publish_time_s=u)
+            add(Topic.FIX, {"timestamp": timestamp(), "frame_id": "vehicle", "latitude": lat, "longitude": lon,
+                            "altitude": -depth, "position_covariance": [0.0] * 9, "position_covariance_type": 0,
+                            "heading": math.radians(i * 3.0)})
             t, u = stamp()
             level = LEVELS[i % len(LEVELS)]
             text = f'step {i}: "{level}" ünïcode ✓ \\ tab\there\nsecond line'
-            rec.log(t, level, text, unix_time_s=u)
-            sec, frac = T0 + n // 4, n % 4 * NS // 4
-            add(Topic.LOG, {"timestamp": {"sec": sec, "nsec": frac}, "level": 1 + i % len(LEVELS),
-                                  "message": text, "name": "executive"})
+            rec.log(t, level, text, publish_time_s=u)
+            add(Topic.LOG, {"timestamp": timestamp(), "level": 1 + i % len(LEVELS), "message": text,
+                            "name": "executive", "file": "", "line": 0})
+            if i % 40 == 0:
+                for topic in (Topic.MAP_GOALS, Topic.MAP_GEOFENCE, Topic.MAP_PLAN):
+                    t, u = stamp()
+                    layer = {"type": "Point", "coordinates": [lon, lat]}
+                    rec.geojson(topic, t, layer, publish_time_s=u)
+                    add(topic, {"timestamp": timestamp(), "geojson": json.dumps(layer, separators=(",", ":"))})
             state = {"time_s": t, "lat_deg": lat, "lon_deg": lon, "depth_m": depth, "heading_deg": (i * 7.5) % 360,
                      "mode": 4 if i else None, "armed": i > 0, "position_ok": i % 5 != 0,
                      "battery_pct": 100.0 - i * 0.3, "energy_used_wh": i * 0.01, "heartbeat_s": t - 0.1}
@@ -190,7 +199,8 @@ def test_node_reads_the_pinned_library_and_the_header(written, indexed):
 
 def test_node_reads_every_message_as_written(written, indexed):
     path, expected = written
-    assert len(expected) == 7 * STEPS + len(range(0, STEPS, 25))  # seven topics each step, policy every 25
+    # seven topics each step, policy every 25, the three map layers every 40
+    assert len(expected) == 7 * STEPS + len(range(0, STEPS, 25)) + 3 * len(range(0, STEPS, 40))
     got = _messages(indexed)
     assert len(got) == len(expected)
     for i, (g, e) in enumerate(zip(got, expected, strict=True)):
@@ -218,16 +228,23 @@ def test_node_sees_the_schemas_and_channels(indexed):
     assert indexed["schemas"]["/log"]["name"] == "foxglove.Log"
 
 
+def _metadata_written() -> list[tuple[str, dict[str, str]]]:
+    """The metadata records in file order: the constructor's, the clock it was given, then the mission's."""
+    clock = {"log_time": "UTC, nanoseconds since the Unix epoch; boot_time_s in each payload is vehicle time since"
+                         " boot", "source": "given", "utc_offset_ns": str(T0 * NS), "held_records": "0", "changes": "0"}
+    return [("executive", METADATA["executive"]), ("clock", clock), ("mission", METADATA["mission"])]
+
+
 def test_node_sees_the_metadata_and_attachments(indexed):
-    assert [(m["name"], m["metadata"]) for m in indexed["metadata"]] == list(METADATA.items())
-    assert indexed["metadata_index_names"] == list(METADATA)
+    assert [(m["name"], m["metadata"]) for m in indexed["metadata"]] == _metadata_written()
+    assert indexed["metadata_index_names"] == [name for name, _ in _metadata_written()]
     name, data, media_type = ATTACHMENT
     [attachment] = indexed["attachments"]  # read with its CRC checked
     assert attachment["name"] == name
     assert attachment["media_type"] == media_type
     assert attachment["size"] == len(data)
     assert attachment["sha256"] == hashlib.sha256(data).hexdigest()
-    assert int(attachment["log_time"]) == NS // 2
+    assert int(attachment["log_time"]) == T0 * NS + NS // 2  # UTC too
     assert indexed["attachment_index_names"] == [name]
 
 
@@ -236,8 +253,8 @@ def test_node_finds_the_indexes_and_statistics_consistent(written, indexed):
     stats = indexed["statistics"]
     assert int(stats["message_count"]) == len(expected)
     assert stats["channel_count"] == len(Topic)
-    assert stats["schema_count"] == len(Topic) - 1  # the two MAVLink channels share one schema
-    assert (stats["metadata_count"], stats["attachment_count"]) == (len(METADATA), 1)
+    assert stats["schema_count"] == len({t.schema_name for t in Topic})  # MAVLink and map topics share theirs
+    assert (stats["metadata_count"], stats["attachment_count"]) == (len(_metadata_written()), 1)
     assert {k: int(v) for k, v in stats["channel_message_counts"].items()} == indexed["counts"]
     assert int(stats["message_start_time"]) == expected[0]["log_time"]
     assert int(stats["message_end_time"]) == expected[-1]["log_time"]
@@ -288,7 +305,7 @@ def test_node_stream_reads_a_cut_log_up_to_where_recover_stops(written, tmp_path
     else:
         assert 0 < n < len(expected)
     assert got == expected[:n]
-    assert [(m["name"], m["metadata"]) for m in stream["metadata"]] == list(METADATA.items())
+    assert [(m["name"], m["metadata"]) for m in stream["metadata"]] == _metadata_written()
     assert [a["sha256"] for a in stream["attachments"]] == [hashlib.sha256(ATTACHMENT[1]).hexdigest()]
 
     recovery = recover(killed, tmp_path / "recovered.mcap")
@@ -297,7 +314,8 @@ def test_node_stream_reads_a_cut_log_up_to_where_recover_stops(written, tmp_path
     # Both implementations agree where the last complete record ends.
     assert recovery.truncated_at_byte == stream["file_bytes"] - stream["bytes_remaining"]
     recovered = [(topic, t, payload) for topic, t, payload in read_messages(recovery.output)]
-    assert recovered == [(m["topic"], m["log_time"] / NS, m["payload"]) for m in got]
+    assert recovered == [(m["topic"], m["payload"]["boot_time_s"],  # vehicle time, lifted out of the payload
+                          {k: v for k, v in m["payload"].items() if k != "boot_time_s"}) for m in got]
     # And the recovered file, a finished log again, reads in Node with the indexed reader.
     again = _read(Path(recovery.output), "--messages")
     assert _messages(again) == got
@@ -316,20 +334,10 @@ def test_node_reader_refuses_a_file_that_is_not_mcap(tmp_path):
 # -- a real closed-loop run ------------------------------------------------------------------
 
 
-@pytest.mark.slow
-def test_node_reads_the_log_of_a_closed_loop_run(demo_plan, synthetic_forecast, tmp_path):
-    """``lrauv sim`` and ``lrauv exec`` over UDP to the goal; Node reads the executive's log as Python does."""
-    from tests.support.helpers import start_west_of_goal
-    from planner.shore.demo import run_closed_loop
-
-    table_path = tmp_path / "demo.lrpt"
-    demo_plan.table.save(table_path)
-    lon, lat = start_west_of_goal(demo_plan.table)
-    result = run_closed_loop(table=table_path, mission=REPO / "missions" / "demo.yaml", truth=synthetic_forecast,
-                             start=f"{lon},{lat}", depth_m=0.0, heading_deg=90.0, speedup=400.0, out=tmp_path,
-                             timeout_s=90.0)
-    assert result.exec_status == 0, result.exec_output
-    log = Path(result.log_path)
+def test_node_reads_the_log_of_a_closed_loop_run(dive_log, demo_plan):
+    """The shared dive (``lrauv sim`` and ``lrauv exec`` over UDP to the goal): Node reads the executive's log as
+    Python does, and its times are the dive's UTC, as Foxglove will show them."""
+    log = Path(dive_log)
     report = _read(log, "--messages")
 
     # Every message, byte for byte; log times repeat, so compare in one total order.
@@ -341,13 +349,20 @@ def test_node_reads_the_log_of_a_closed_loop_run(demo_plan, synthetic_forecast, 
         metadata = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
         attachments = {a.name: a.data for a in reader.iter_attachments()}
     assert report["message_count"] == summary.statistics.message_count > 100
-    assert {"/vehicle/fix", "/log", "/executive/decision", "/mavlink/rx", "/mavlink/tx"} <= set(report["counts"])
+    assert {"/vehicle/fix", "/log", "/executive/decision", "/mavlink/rx", "/mavlink/tx", "/map/goals",
+            "/map/geofence", "/map/plan"} <= set(report["counts"])
     assert report["indexed_counts"] == report["counts"]
     assert [(m["name"], m["metadata"]) for m in report["metadata"]] == metadata
     policy = f"policy-{demo_plan.table.crc32:08x}.lrpt"
     assert policy in attachments
     assert {a["name"]: (a["size"], a["sha256"]) for a in report["attachments"]} == {
         name: (len(data), hashlib.sha256(data).hexdigest()) for name, data in attachments.items()}
-    assert attachments[policy] == table_path.read_bytes()
+    assert attachments[policy] == (log.parent / "demo.lrpt").read_bytes()
     decisions = [m["payload"] for m in report["messages"] if m["topic"] == "/executive/decision"]
     assert {d["action"] for d in decisions} >= {"FORWARD", "AT_GOAL"}
+    # Foxglove's view: log times in UTC (after 2020), and each Foxglove timestamp equal to its log time.
+    assert int(report["first_log_time"]) > 1_577_836_800 * NS
+    for m in report["messages"]:
+        if "timestamp" in m["payload"]:
+            stamp = m["payload"]["timestamp"]
+            assert int(m["log_time"]) == stamp["sec"] * NS + stamp["nsec"], m["topic"]
