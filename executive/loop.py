@@ -545,9 +545,11 @@ class Executive(PlanChanges, StationLink):
     def _event(self, now_s: float, event: Event) -> None:
         self._log(self.recorder.log, now_s, event.level, event.text)
         if event.level in ("warning", "error"):
-            self._send(now_s, bridge.statustext(self.mav, event))
+            for msg in bridge.statustexts(self.mav, event):
+                self._send(now_s, msg)
             if self.gcs is not None:
-                self._send_on(self.gcs_mav, now_s, bridge.statustext(self.gcs_mav, event))
+                for msg in bridge.statustexts(self.gcs_mav, event):
+                    self._send_on(self.gcs_mav, now_s, msg)
 
     def _record_state(self, now_s: float, v: VehicleState, msg: Any = None) -> None:
         lat, lon, depth = v.lat_deg, v.lon_deg, v.depth_m

@@ -18,9 +18,11 @@ import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
+from weakref import WeakKeyDictionary
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from executive import mission_protocol as mp
 from executive.signing import Streams, Verdict, is_signed, timestamp_at
 from planner.contract.errors import ExecutiveError
 from executive.state import (
@@ -52,7 +54,10 @@ MASK_POSITION_ONLY = 3576  # x, y, z
 # Messages that carry time_boot_ms and drive decisions.
 DECISION_MESSAGES = frozenset({"GLOBAL_POSITION_INT", "ATTITUDE"})
 _UNKNOWN_HDG = 65535
-_STATUSTEXT_LEN = 50
+# A warning longer than one STATUSTEXT goes out in MAVLink 2 chunks (common.xml STATUSTEXT ``id`` and
+# ``chunk_seq``), at most this many: 4 x 50 bytes holds every refusal the executive words, and a
+# longer text ends in "..." rather than flooding a slow link.
+MAX_STATUSTEXT_CHUNKS = 4
 _SEVERITY = {"debug": mavlink.MAV_SEVERITY_DEBUG, "info": mavlink.MAV_SEVERITY_INFO,
              "warning": mavlink.MAV_SEVERITY_WARNING, "error": mavlink.MAV_SEVERITY_ERROR}
 
@@ -441,9 +446,38 @@ def asks_for_progress(msg: Any, system: int = AUTOPILOT_SYSTEM) -> bool:
     return msg.get_msgId() == mavlink.MAVLINK_MSG_ID_TIMESYNC and msg.tc1 == 0 and from_autopilot(msg, system)
 
 
-def statustext(mav: mavlink.MAVLink, event: Event) -> Any:
-    text = event.text if len(event.text) <= _STATUSTEXT_LEN else event.text[: _STATUSTEXT_LEN - 3] + "..."
-    return mav.statustext_encode(_SEVERITY[event.level], text.encode("ascii", "replace"))
+# The last STATUSTEXT chunk id used on each link (each ``MAVLink`` encoder is one link): ids count 1..65535
+# per link, so that a ground station never sees two texts of one id in a row from us.
+_TEXT_IDS: WeakKeyDictionary[mavlink.MAVLink, int] = WeakKeyDictionary()
+
+
+def statustexts(mav: mavlink.MAVLink, event: Event) -> list[Any]:
+    """``event`` as STATUSTEXT for the link ``mav`` encodes for: one message (id 0) when it fits in 50 bytes,
+    else MAVLink 2 chunks (common.xml STATUSTEXT: one non-zero ``id``, ``chunk_seq`` 0, 1, ..., the last
+    chunk shorter than 50 bytes, i.e. NUL-terminated), at most ``MAX_STATUSTEXT_CHUNKS`` of them.
+
+    A text beyond that many chunks is cut, ending in "...". Chunks are UTF-8 and never split a
+    character (``mission_protocol.status_chunks``, which the mission protocol's refusals use too).
+    """
+    severity = _SEVERITY[event.level]
+    budget = MAX_STATUSTEXT_CHUNKS * mp.STATUSTEXT_LEN - 1  # bytes: the last chunk must stay shorter than 50
+    chunks = mp.status_chunks(_clip(event.text, budget), chunk_id=1, severity=severity)
+    while len(chunks) > MAX_STATUSTEXT_CHUNKS:  # characters that straddle chunk boundaries took room
+        budget -= 3
+        chunks = mp.status_chunks(_clip(event.text, budget), chunk_id=1, severity=severity)
+    if len(chunks) > 1:
+        text_id = _TEXT_IDS.get(mav, 0) % 65535 + 1
+        _TEXT_IDS[mav] = text_id
+        chunks = tuple(replace(c, chunk_id=text_id) for c in chunks)
+    return [mp.encode(mav, chunk) for chunk in chunks]
+
+
+def _clip(text: str, max_bytes: int) -> str:
+    """``text`` if its UTF-8 takes at most ``max_bytes``, else cut to fit with "..." at the end."""
+    data = text.encode("utf-8")
+    if len(data) <= max_bytes:
+        return text
+    return data[: max_bytes - 3].decode("utf-8", "ignore") + "..."  # "ignore": a character the cut split
 
 
 def describe(msg: Any) -> dict[str, Any]:

@@ -7,8 +7,10 @@ either way cost time, not data. No ResetSessions: it would close other clients'
 sessions too (the spec's warning under "Uploading a File").
 
 The receiver judges the file when the session is closed: a NAK to TerminateSession
-means it refused the file (``executive.ftp``) and ``put_file`` raises. The wire format
-(``Frame``, ``Opcode``, ``ErrorCode``) is ``executive.ftp``'s.
+means it refused the file (``executive.ftp``) and ``put_file`` raises, with the reason
+the executive sent as STATUSTEXT just before the NAK (FTP has no field for it; a long
+reason comes in MAVLink 2 chunks, joined here). The wire format (``Frame``, ``Opcode``,
+``ErrorCode``) is ``executive.ftp``'s.
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ from executive.ftp import MAX_DATA, ErrorCode, Frame, Opcode
 from executive.mavlink_bridge import EXECUTIVE_COMPONENT, EXECUTIVE_SYSTEM
 from executive.mission_protocol import addressed_to
 from planner.contract.errors import ShoreError
+from planner.shore.mission_client import StatusTexts, linger
 
 WINDOW = 8  # WriteFile requests in flight
+_REFUSED = "refused "  # how the executive's STATUSTEXT for a refused upload begins (executive.plan_changes)
 
 
 class FtpUploadError(ShoreError):
@@ -63,6 +67,7 @@ class _Link:
         self.timeout_s = timeout_s
         self.retries = retries
         self._seq = random.randrange(0x10000)  # unlike a previous upload's, so no cached reply fits ours
+        self.texts = StatusTexts()  # what the target says meanwhile: a refusal's reason
 
     def request(self, session: int, opcode: Opcode, offset: int = 0, data: bytes = b"") -> Frame:
         req = Frame(self._seq, session, opcode, len(data), 0, 0, offset, data)
@@ -76,11 +81,14 @@ class _Link:
     def receive(self, until_s: float) -> Frame | None:
         """The next FTP reply addressed to us from the target, None at ``until_s``."""
         while (left := until_s - time.monotonic()) > 0:
-            msg = self.conn.recv_match(type="FILE_TRANSFER_PROTOCOL", blocking=True, timeout=left)
+            msg = self.conn.recv_match(type=["FILE_TRANSFER_PROTOCOL", "STATUSTEXT"], blocking=True, timeout=left)
             if msg is None:
                 return None
             if (msg.get_srcSystem(), msg.get_srcComponent()) != self.target or \
                     not addressed_to(msg, self.conn.source_system, self.conn.source_component):
+                continue
+            if msg.get_type() == "STATUSTEXT":
+                self.texts.add(msg)
                 continue
             reply = Frame.parse(bytes(msg.payload))
             if reply.opcode in (Opcode.ACK, Opcode.NAK):
@@ -161,4 +169,7 @@ def put_file(conn: Any, data: bytes, remote_path: str, *, target_system: int = E
     _write_all(link, what, created.session, bytes(data))
     closed = _call(link, what, created.session, Opcode.TERMINATE_SESSION)
     if closed.opcode == Opcode.NAK:
-        raise FtpUploadError(f"{what}: refused by the vehicle (TerminateSession NAK {_nak_name(closed)})")
+        linger(link.conn, link.texts, link.target, (conn.source_system, conn.source_component), _REFUSED)
+        reason = link.texts.reason(_REFUSED)
+        raise FtpUploadError(f"{what}: refused by the vehicle (TerminateSession NAK {_nak_name(closed)})"
+                             + (f": {reason}" if reason else ""))

@@ -50,7 +50,7 @@ class MissionDownloadError(MissionTransferError):
     """The vehicle refused the download, or did not answer."""
 
 
-class _Texts:
+class StatusTexts:
     """STATUSTEXT from the target, chunks (MAVLink 2 ``id``/``chunk_seq``) joined.
 
     Chunks are joined as UTF-8 bytes; a chunk shorter than ``STATUSTEXT_LEN`` bytes is
@@ -73,8 +73,9 @@ class _Texts:
             self.lines.append(b"".join(parts[k] for k in sorted(parts)).decode("utf-8", "replace"))
             del self._chunks[chunk_id]
 
-    def reason(self) -> str:
-        refusals = [t.removeprefix("mission refused: ") for t in self.lines if t.startswith("mission refused: ")]
+    def reason(self, prefix: str = "mission refused: ") -> str:
+        """The last text that starts with ``prefix``, without it; "" when none came."""
+        refusals = [t.removeprefix(prefix) for t in self.lines if t.startswith(prefix)]
         return refusals[-1] if refusals else ""
 
 
@@ -133,7 +134,7 @@ def upload_goals(conn: Any, items: Sequence[MissionItem], *, target_system: int 
     """
     target = (target_system, target_component)
     sender = MissionSender(target, timeout_s=count_timeout_s, item_timeout_s=item_timeout_s, retries=retries)
-    texts = _Texts()
+    texts = StatusTexts()
 
     def status(msg: Any, _now: float) -> tuple[Outgoing, ...]:
         texts.add(msg)
@@ -150,17 +151,18 @@ def upload_goals(conn: Any, items: Sequence[MissionItem], *, target_system: int 
         return
     if sender.result is None:
         raise MissionUploadError(f"upload to system {target_system} component {target_component}: {sender.error}")
-    _linger(conn, texts, target, (conn.mav.srcSystem, conn.mav.srcComponent))
+    linger(conn, texts, target, (conn.mav.srcSystem, conn.mav.srcComponent))
     reason = texts.reason()
     raise MissionUploadError(
         f"system {target_system} component {target_component} refused the mission: {sender.error}"
         + (f": {reason}" if reason else ""), sender.result, reason)
 
 
-def _linger(conn: Any, texts: _Texts, target: tuple[int, int], me: tuple[int, int]) -> None:
+def linger(conn: Any, texts: StatusTexts, target: tuple[int, int], me: tuple[int, int],
+           prefix: str = "mission refused: ") -> None:
     """Read what is already on its way (the STATUSTEXT sent just before the ACK may come late)."""
     end = time.monotonic() + _LINGER_S
-    while time.monotonic() < end and not texts.reason():
+    while time.monotonic() < end and not texts.reason(prefix):
         msg = conn.recv_match(type="STATUSTEXT", blocking=True, timeout=_POLL_S)
         if msg is not None and _from_target(msg, target, me):
             texts.add(msg)

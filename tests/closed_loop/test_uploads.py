@@ -109,7 +109,7 @@ def test_a_bad_table_is_refused_and_the_running_plan_goes_on(live, optimistic_ta
                                                         depth_m=0.0)).to_bytes())
     conn = live.ground_station()
     try:
-        with pytest.raises(LrauvError, match="refused by the vehicle"):
+        with pytest.raises(LrauvError, match="refused by the vehicle") as error:
             put_file(conn, bytes(blob), "/tables/bad.lrpt", timeout_s=2.0)
     finally:
         conn.close()
@@ -119,6 +119,9 @@ def test_a_bad_table_is_refused_and_the_running_plan_goes_on(live, optimistic_ta
     live.stop()
     refused = [r for r in _policy(live.executive.config.log_path) if r["reason"] == "refused"]
     assert len(refused) == 1 and refused[0]["refusal"]
+    # The reason reaches the ground station whole (STATUSTEXT chunks, joined), not cut at 50 characters.
+    said = f"{refused[0]['refusal']}; the running plan goes on"
+    assert len(said) > 50 and str(error.value).endswith(f"(TerminateSession NAK Fail): {said}"), str(error.value)
 
 
 def test_bad_mission_items_are_refused_and_the_running_plan_goes_on(live):

@@ -44,7 +44,7 @@ from planner.contract.mission import MissionGoal  # noqa: E402
 from planner.shore.mission_client import (  # noqa: E402
     MissionDownloadError,
     MissionUploadError,
-    _Texts,
+    StatusTexts,
     download_items,
     upload_goals,
 )
@@ -235,11 +235,11 @@ def test_status_chunks_count_utf8_bytes_and_never_cut_a_character():
 def test_chunked_utf8_statustext_is_joined_by_the_ground_side():
     text = "mission refused: " + "ça ne va pas: 12 °C, 北京 " * 5
     for n in (0, 1):  # two texts, through pymavlink's wire format
-        texts = _Texts()
+        texts = StatusTexts()
         for chunk in status_chunks(text if n else text[:33], chunk_id=7):
             texts.add(_through_the_wire(chunk))
         assert texts.lines == [text if n else text[:33]]
-    texts = _Texts()
+    texts = StatusTexts()
     for chunk in status_chunks("x" * 100, chunk_id=8):  # an exact multiple: the empty chunk ends it
         texts.add(_through_the_wire(chunk))
     assert texts.lines == ["x" * 100]
