@@ -65,12 +65,12 @@ def add_parser(sub: Subcommands) -> None:
                     help="storage quota of uploads: files held at once (default 16); more are refused")
     ex.add_argument("--upload-max-mb", type=float, default=64.0, metavar="MB",
                     help="storage quota of uploads: megabytes (MiB) held at once (default 64); more are refused")
-    ex.add_argument("--quiet", action="store_true")
+    ex.add_argument("--quiet", action="store_true", help="no start and end summary on stdout")
 
     log = sub.add_parser("log", help="MCAP log tools")
     lsub = log.add_subparsers(dest="log_command", required=True)
     rec = lsub.add_parser("recover", help="rebuild a readable log from one left by a killed executive")
-    rec.add_argument("source", type=Path)
+    rec.add_argument("source", type=Path, help="the log a killed executive left")
     rec.add_argument("dest", type=Path, nargs="?", help="output (default SOURCE.recovered.mcap)")
 
 

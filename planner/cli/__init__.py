@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from importlib import import_module
 from typing import Any
 
-from planner.cli.help_text import describe
+from planner.cli.help_text import UserHelp, describe
 from planner.contract.arguments import CommandParser
 from planner.contract.errors import LrauvError
 
@@ -58,7 +58,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     With ``command``, only that subcommand's module is imported; the others are listed by
     name and help alone (enough for ``lrauv --help`` and for naming a wrong subcommand).
     """
-    parser = CommandParser(prog="lrauv", description="Feedback motion planning and onboard execution for long-range AUVs.")
+    parser = CommandParser(prog="lrauv", description="Feedback motion planning and onboard execution for long-range AUVs.",
+                           formatter_class=UserHelp)
     sub = parser.add_subparsers(dest="command", required=True)
     wanted = None if command is None else COMMANDS[command].module
     for c in TABLE:

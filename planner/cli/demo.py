@@ -16,12 +16,13 @@ def add_parser(sub: Subcommands) -> None:
     p.add_argument("--mission", type=Path, required=True, help="mission YAML (vehicle, safety, goal)")
     p.add_argument("--truth", type=Path, required=True, help="forecast the simulator uses as the true currents")
     p.add_argument("--start", required=True, help="LON,LAT of the vehicle at the start")
-    p.add_argument("--depth-m", type=float, default=0.0)
-    p.add_argument("--heading-deg", type=float, default=0.0)
+    p.add_argument("--depth-m", type=float, default=0.0, help="depth of the vehicle at the start, m (default 0)")
+    p.add_argument("--heading-deg", type=float, default=0.0,
+                   help="heading at the start, degrees clockwise from north (default 0)")
     p.add_argument("--speedup", type=float, default=1000.0, help="simulator speedup over real time (default 1000)")
     p.add_argument("--out", type=Path, default=Path("out/demo"), help="directory for the log, track and pictures")
     p.add_argument("--timeout-s", type=float, default=170.0, help="wall-time limit for the run")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulator's sensor noise (default 0)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr (drawn only on a terminal)")
 
 

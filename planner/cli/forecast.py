@@ -60,19 +60,20 @@ def add_parser(sub: Subcommands) -> None:
     fsub = fc.add_subparsers(dest="forecast_command", required=True)
     info = fsub.add_parser("info", help="describe a forecast file as the loader understands it")
     info.add_argument("file", metavar="FILE|URL", help="a netCDF file, or the http(s) URL of one (downloaded to the cache)")
-    info.add_argument("--variables", type=lambda t: t.split(","))
-    info.add_argument("--grid-file", type=Path)
+    info.add_argument("--variables", type=lambda t: t.split(","), metavar="U,V",
+                      help="U,V variable names, when not found by CF standard names")
+    info.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
     info.add_argument("--cache-dir", type=Path, metavar="DIR",
                       help="cache for downloaded forecasts (default: $LRAUV_CACHE_DIR, $XDG_CACHE_HOME/lrauv or "
                            "~/.cache/lrauv)")
     synth = fsub.add_parser("synth", help="write the built-in synthetic Southern California Bight forecast")
-    synth.add_argument("out", type=Path)
-    synth.add_argument("--seed", type=int, default=0)
-    synth.add_argument("--hours", type=int, default=72)
+    synth.add_argument("out", type=Path, help="netCDF file to write")
+    synth.add_argument("--seed", type=int, default=0, help="seed of the scenario's eddies and errors (default 0)")
+    synth.add_argument("--hours", type=int, default=72, help="forecast length in whole hours (default 72)")
     synth.add_argument("--issue", type=int, help="forecast issue number (error shrinks with each issue); default: the truth")
 
     gyre = fsub.add_parser("gyre", help="write the analytic double gyre (Shadden et al. 2005) as a forecast")
-    gyre.add_argument("out", type=Path)
+    gyre.add_argument("out", type=Path, help="netCDF file to write")
     gyre.add_argument("--peak-speed-m-s", type=float, help="peak speed of the steady gyre, m/s (default 0.5)")
     gyre.add_argument("--eps", type=float, help="oscillation amplitude of the dividing line, 0..0.5 (default 0.1; 0 = steady)")
     gyre.add_argument("--period-h", type=float, help="oscillation period in hours (default 12)")
@@ -80,7 +81,7 @@ def add_parser(sub: Subcommands) -> None:
     _grid_and_time_options(gyre, hours=48, bbox="-118.2,33.3,-117.8,33.467")
 
     tidal = fsub.add_parser("tidal", help="write an M2 tidal current through a channel with a constriction as a forecast")
-    tidal.add_argument("out", type=Path)
+    tidal.add_argument("out", type=Path, help="netCDF file to write")
     tidal.add_argument("--amplitude-m-s", type=float, help="tidal current amplitude at the neck, m/s (default 0.8)")
     tidal.add_argument("--period-h", type=float, help="tidal period in hours (default M2, 12.4206)")
     tidal.add_argument("--phase-rad", type=float, help="tidal phase at the issue time, radians (default 0: flood east at full strength)")
@@ -95,7 +96,7 @@ def add_parser(sub: Subcommands) -> None:
     _grid_and_time_options(tidal, hours=72, bbox="-118.2,33.3,-117.8,33.5")
 
     ens = fsub.add_parser("ensemble", help="write a synthetic forecast ensemble: one file, u/v with a leading member dimension")
-    ens.add_argument("out", type=Path)
+    ens.add_argument("out", type=Path, help="netCDF file to write")
     ens.add_argument("--kind", choices=["gyre", "scb"], required=True,
                      help="gyre: double gyres with drawn eps, phase and peak speed; scb: one SCB forecast issue, independent error draws")
     ens.add_argument("--members", type=int, required=True, help="number of members, 1..1000")

@@ -18,11 +18,11 @@ def add_parser(sub: Subcommands) -> None:
     p.add_argument("mission", type=Path, help="mission YAML (region, vehicle, physical settings, first goal)")
     p.add_argument("--ensemble", type=Path, required=True, help="forecast file with a member dimension (>= 3 members)")
     p.add_argument("--starts", type=int, default=50, help="start states per held-out member (default 50)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the start states (default 0)")
     p.add_argument("--dt-s", type=float, default=5.0, help="physics step in seconds (default 5)")
     p.add_argument("--max-hours", type=float, default=24.0, help="a run times out after this (default 24)")
     add_cluster_arguments(p)
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -56,7 +56,9 @@ def add_parser(sub: Subcommands) -> None:
                       help="planning model: the paper's graph (default) or the physical one (docs/physical-model.md)")
     plan.add_argument("--criterion", choices=["robust", "optimistic", "expected"],
                       help="paper: robust (default) or optimistic; physical: robust (default) or expected")
-    plan.add_argument("--uncertainty", choices=["lateral", "none"])
+    plan.add_argument("--uncertainty", choices=["lateral", "none"],
+                      help="paper model: lateral (a move may also end in a cell beside the intended one) or none"
+                           " (default: the mission's)")
     plan.add_argument("--costs", type=costs, help="e.g. drift=0,forward=4,rotate=10,glide=2")
     plan.add_argument("--calm-speed", type=float, help="calm threshold in m/s (default 0.01)")
     plan.add_argument("--time-varying", action="store_true", default=None,
