@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from executive.helm import HelmConfig
 from planner.contract.arguments import Subcommands
+from planner.contract.columns import say
 from planner.contract.errors import ExecutiveError
 from planner.contract.table import PolicyTable, read_table_file
 
@@ -81,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
         r = recover(args.source, args.dest)
         state = "complete" if r.complete else f"truncated at byte {r.truncated_at_byte}"
         last = "none" if r.last_log_time_s is None else f"{r.last_log_time_s:.1f} s"
-        print(f"recovered {r.messages:,} messages on {r.channels} channels from {r.source} ({state});"
-              f" last log time {last}; wrote {r.output}")
+        say(f"recovered {r.messages:,} messages on {r.channels} channels from {r.source} ({state});"
+            f" last log time {last}; wrote {r.output}")
         return 0
     return _exec(args)
 
@@ -205,34 +206,34 @@ def _exec(args: argparse.Namespace) -> int:
         gcs = f", ground station on {args.gcs}" if args.gcs else ""
         signed = "" if key is None else f", signing required (key {key.fingerprint})"
         if resumed is not None:
-            print(f"resumed    from {args.resume} (saved {resumed.saved_utc}): goal {plan.index} of {len(plan.goals)};"
-                  f" previous log {recovered or 'absent'}", flush=True)
-        print(f"lrauv exec: {len(plan.goals)} goal(s), table crc {table.crc32:08x}, link {args.link}{gcs}{signed},"
-              f" log {log_path}", flush=True)
+            say(f"resumed    from {args.resume} (saved {resumed.saved_utc}): goal {plan.index} of {len(plan.goals)};"
+                f" previous log {recovered or 'absent'}", flush=True)
+        say(f"lrauv exec: {len(plan.goals)} goal(s), table crc {table.crc32:08x}, link {args.link}{gcs}{signed},"
+            f" log {log_path}", flush=True)
     s = executive.run(stop)
     if not args.quiet:
         energy = "unknown" if s.energy_used_wh is None else f"{s.energy_used_wh:.1f} Wh"
         took = "-" if s.mission_time_s is None else f"{s.mission_time_s / 3600:.2f} h vehicle time"
-        print(f"goal       {'reached' if s.reached else 'not reached'} ({took}); stopped: {s.reason}; phase {s.final_phase}")
-        print(f"energy     {energy}")
-        print(f"run        {s.vehicle_time_s / 3600:.2f} h vehicle time in {s.wall_s:.1f} s wall;"
-              f" {s.decisions:,} decisions, {s.messages_in:,} messages in ({s.messages_bad} bad), {s.commands_out:,} out")
+        say(f"goal       {'reached' if s.reached else 'not reached'} ({took}); stopped: {s.reason}; phase {s.final_phase}")
+        say(f"energy     {energy}")
+        say(f"run        {s.vehicle_time_s / 3600:.2f} h vehicle time in {s.wall_s:.1f} s wall;"
+            f" {s.decisions:,} decisions, {s.messages_in:,} messages in ({s.messages_bad} bad), {s.commands_out:,} out")
         if s.messages_not_logged:
-            print(f"raw log    {s.messages_not_logged:,} unused autopilot messages counted, not logged raw")
+            say(f"raw log    {s.messages_not_logged:,} unused autopilot messages counted, not logged raw")
         if s.decision_median_us is not None:
-            print(f"latency    decision median {s.decision_median_us:.0f} us, p99 {s.decision_p99_us:.0f} us"
-                  f" (with MCAP writes p99 {s.message_p99_us:.0f} us)")
+            say(f"latency    decision median {s.decision_median_us:.0f} us, p99 {s.decision_p99_us:.0f} us"
+                f" (with MCAP writes p99 {s.message_p99_us:.0f} us)")
         if executive.swaps:
-            print(f"plans      {len(executive.swaps)} swapped in: "
-                  + "; ".join(f"{w.get('source')} -> goal {w['goal_index']} table {w['table_crc32']}" for w in executive.swaps))
+            say(f"plans      {len(executive.swaps)} swapped in: "
+                + "; ".join(f"{w.get('source')} -> goal {w['goal_index']} table {w['table_crc32']}" for w in executive.swaps))
         if executive.signature_refusals:
-            print("signing    refused " + ", ".join(f"{n:,} {verdict.value}"
-                                                     for verdict, n in executive.signature_refusals.items()))
+            say("signing    refused " + ", ".join(f"{n:,} {verdict.value}"
+                                                   for verdict, n in executive.signature_refusals.items()))
         if executive.gcs is not None:
             print(executive.router.summary().replace("ground station: ", "gcs        ", 1))
         dropped = executive.recorder.records_dropped
         lost = f" ({dropped:,} records dropped: the disk failed or fell behind)" if dropped else ""
-        print(f"log        {s.log_path}{lost}", flush=True)
+        say(f"log        {s.log_path}{lost}", flush=True)
     return 0 if s.reached or not args.exit_on_arrival else 1
 
 

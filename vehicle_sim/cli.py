@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from planner.contract.arguments import CommandParser, Subcommands
+from planner.contract.columns import fit
 from planner.contract.errors import LrauvError, SimulatorError
 
 if TYPE_CHECKING:  # at run time imported where used, as below: registering the parser loads neither
@@ -119,11 +120,11 @@ def run(args: argparse.Namespace) -> int:
     if not args.quiet:
         wall = max(time.monotonic() - wall0, 1e-9)
         state = "armed" if sim.armed else "disarmed"
-        print(f"lrauv sim: stopped at {sim.time_s:.1f} s simulated after {wall:.1f} s wall "
-              f"({sim.time_s / wall:.0f}x); {sim.mode.name} {state}, {sim.energy_used_wh:.1f} Wh used, "
-              f"{sim.stats.parse_errors} undecodable input(s)"
-              + (f"; lockstep: waited {sim.stats.lockstep_waits} times, ran free {sim.stats.lockstep_expired},"
-                 f" resent {sim.stats.lockstep_resends}" if config.lockstep_slack_s is not None else ""),
+        print(fit(f"lrauv sim: stopped at {sim.time_s:.1f} s simulated after {wall:.1f} s wall "
+                  f"({sim.time_s / wall:.0f}x); {sim.mode.name} {state}, {sim.energy_used_wh:.1f} Wh used, "
+                  f"{sim.stats.parse_errors} undecodable input(s)"
+                  + (f"; lockstep: waited {sim.stats.lockstep_waits} times, ran free {sim.stats.lockstep_expired},"
+                     f" resent {sim.stats.lockstep_resends}" if config.lockstep_slack_s is not None else "")),
               file=sys.stderr)
     return 0
 

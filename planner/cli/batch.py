@@ -9,6 +9,7 @@ from pathlib import Path
 
 from planner.cli.cluster_options import add_cluster_arguments
 from planner.contract.arguments import Subcommands
+from planner.contract.columns import say
 from planner.contract.errors import ShoreError
 
 
@@ -29,13 +30,13 @@ def run(args: argparse.Namespace) -> int:
                      workers=args.workers, note=note)
     for r, path in zip(done.results, done.written):
         if path is None:
-            print(f"failed     {r.vehicle} goal {r.goal_index}: {r.error}")
+            say(f"failed     {r.vehicle} goal {r.goal_index}: {r.error}")
             continue
         assert r.table is not None
-        print(f"table      {os.fspath(path)}  ({len(r.table):,} bytes; reachable {r.reachable:,} of "
-              f"{r.water_states:,} water states; {r.plan_s:.2f} s)")
+        say(f"table      {os.fspath(path)}  ({len(r.table):,} bytes; reachable {r.reachable:,} of "
+            f"{r.water_states:,} water states; {r.plan_s:.2f} s)")
     n = len(done.items)
-    print(f"batch      {n - done.failed} of {n} goals planned in {done.elapsed_s:.1f} s")
+    say(f"batch      {n - done.failed} of {n} goals planned in {done.elapsed_s:.1f} s")
     if done.failed:
         raise ShoreError(f"batch: {done.failed} of {n} goals could not be planned (listed above)")
     return 0

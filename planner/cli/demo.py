@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from planner.contract.arguments import Subcommands
+from planner.contract.columns import say
 
 
 def add_parser(sub: Subcommands) -> None:
@@ -41,8 +42,8 @@ def run(args: argparse.Namespace) -> int:
         )
     sys.stdout.write(result.exec_output)
     picture = draw_track(args.table, result.track_csv, args.out / "pictures" / "track.png", truth=args.truth)
-    print(f"track      {result.track_csv}")
-    print(f"picture    {picture}")
-    print(f"layout     {result.layout_path} (Foxglove: Layouts, Import from file; then open {result.log_path})")
-    print(f"demo       {result.wall_s:.1f} s wall in all")
+    say(f"track      {result.track_csv}")
+    say(f"picture    {picture}")
+    say(f"layout     {result.layout_path} (Foxglove: Layouts, Import from file; then open {result.log_path})")
+    say(f"demo       {result.wall_s:.1f} s wall in all")
     return result.exec_status

@@ -15,6 +15,7 @@ from planner.cli.cluster_options import add_cluster_arguments
 from planner.cli.progress_bar import announcer, bars
 from planner.contract.arguments import Subcommands
 from planner.contract.atomic import write_atomic
+from planner.contract.columns import say
 from planner.contract.errors import LrauvError
 from planner.shore.evaluation.runs import (
     DEFAULT_METHODS,
@@ -87,36 +88,41 @@ def run(args: argparse.Namespace) -> int:
             campaign = run_all(campaign, runner=runner, meter=meter)
     summaries = summarise(campaign.results, methods)
     resolution = resolution_change(campaign) if args.resolution else None
-    print(format_table(summaries))
+    say(format_table(summaries))
     if resolution is not None:
         for m, r in resolution.items():
-            print(f"resolution {m}: predicted start cost changes by median {r['median']:.1%}, p90 {r['p90']:.1%},"
-                  f" max {r['max']:.1%} over {int(r['starts'])} starts when the spacing halves")
+            say(f"resolution {m}: predicted start cost changes by median {r['median']:.1%}, p90 {r['p90']:.1%},"
+                f" max {r['max']:.1%} over {int(r['starts'])} starts when the spacing halves")
     t = campaign.timings_s
-    print(f"time       plans {t['plan_s']:.1f} s, {len(campaign.results)} runs {t['runs_s']:.1f} s")
+    say(f"time       plans {t['plan_s']:.1f} s, {len(campaign.results)} runs {t['runs_s']:.1f} s")
     if args.out is not None:
         meta = {"mission": str(args.mission), "forecast": str(forecast), "truth": [str(p) for p in args.truth],
                 "starts": args.starts, "seed": args.seed, "dt_s": args.dt_s, "max_hours": args.max_hours,
                 "replan_h": args.replan_h, "cruise_speed_m_s": mission.settings.vehicle.cruise_speed_m_s}
         for path in write_outputs(args.out, campaign.results, summaries, resolution, meta):
-            print(f"wrote      {path}")
+            say(f"wrote      {path}")
     return 0
 
 
 def format_table(summaries: list[MethodSummary]) -> str:
-    """The side-by-side table printed by ``lrauv evaluate``."""
-    head = (f"{'method':<18} {'runs':>5} {'marked':>6} {'arrived':>7} {'success':>8} {'of marked':>9} {'coverage':>8}"
-            f" {'time h':>7} {'energy Wh':>9} {'pred Wh':>8} {'pred err':>8} {'vs naive':>8} "
-            f"{'stranded':>8} {'left':>5} {'timeout':>7} {'gave up':>7} {'refused':>7}")
-    lines = [head, "-" * len(head)]
+    """The two tables printed by ``lrauv evaluate``, each within 100 columns: what became of the runs
+    (counts), then how well each method did (shares; medians over its arrived runs)."""
+    counts = (f"{'method':<18} {'runs':>5} {'marked':>6} {'arrived':>7} {'stranded':>8} {'left':>5} {'timeout':>7}"
+              f" {'gave up':>7} {'refused':>7}")
+    lines = ["runs by outcome", counts, "-" * len(counts)]
     for s in summaries:
         o = s.outcomes
+        lines.append(f"{s.method:<18} {s.runs:>5} {s.marked_reachable:>6} {o['arrived']:>7} {o['stranded']:>8}"
+                     f" {o['left_region']:>5} {o['timed_out']:>7} {o['gave_up']:>7} {o['refused']:>7}")
+    figures = (f"{'method':<18} {'success':>8} {'of marked':>9} {'coverage':>8} {'time h':>7} {'energy Wh':>9}"
+               f" {'pred Wh':>8} {'pred err':>8} {'vs naive':>8}")
+    lines += ["", "figures (time, energy, predicted: medians of arrived runs; pred err: spent / predicted - 1)",
+              figures, "-" * len(figures)]
+    for s in summaries:
         lines.append(
-            f"{s.method:<18} {s.runs:>5} {s.marked_reachable:>6} {o['arrived']:>7} {_pct(s.success_rate):>8}"
-            f" {_pct(s.success_from_reachable):>9} {_pct(s.coverage):>8} {_num(s.median_time_h, 2):>7}"
-            f" {_num(s.median_energy_wh, 1):>9} {_num(s.median_predicted_wh, 1):>8} {_pct(s.energy_error, signed=True):>8}"
-            f" {_pct(s.energy_vs_naive, signed=True):>8} {o['stranded']:>8} {o['left_region']:>5} {o['timed_out']:>7}"
-            f" {o['gave_up']:>7} {o['refused']:>7}")
+            f"{s.method:<18} {_pct(s.success_rate):>8} {_pct(s.success_from_reachable):>9} {_pct(s.coverage):>8}"
+            f" {_num(s.median_time_h, 2):>7} {_num(s.median_energy_wh, 1):>9} {_num(s.median_predicted_wh, 1):>8}"
+            f" {_pct(s.energy_error, signed=True):>8} {_pct(s.energy_vs_naive, signed=True):>8}")
     common = summaries[0].all_arrived if summaries else 0
     if common and len(summaries) > 1:
         means = ", ".join(f"{s.method} {s.mean_energy_all_arrived_wh:.1f}" for s in summaries)

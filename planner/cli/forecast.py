@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from planner.contract.arguments import Subcommands, floats
+from planner.contract.columns import say
 from planner.contract.errors import LrauvError, PlannerError
 
 # An analytic source's settings field (or check name) -> the option that sets it (the settings' errors
@@ -135,20 +136,20 @@ def run(args: argparse.Namespace) -> int:
         from planner.cli.plan import local_forecast
 
         path = local_forecast(args.file, args.cache_dir)
-        print(describe(open_forecast(path, variables=variables, grid_file=args.grid_file)))
+        say(describe(open_forecast(path, variables=variables, grid_file=args.grid_file)))
         return 0
     if args.forecast_command == "ensemble":
-        print(f"wrote {write_ensemble_from_args(args)}")
+        say(f"wrote {write_ensemble_from_args(args)}")
         return 0
     if args.forecast_command == "gyre":
         from planner.forecast.synthetic.double_gyre import write_gyre
 
-        print(f"wrote {write_gyre(args.out, settings_from_args(args))}")
+        say(f"wrote {write_gyre(args.out, settings_from_args(args))}")
         return 0
     if args.forecast_command == "tidal":
         from planner.forecast.synthetic.tidal import write_tidal
 
-        print(f"wrote {write_tidal(args.out, tidal_settings_from_args(args))}")
+        say(f"wrote {write_tidal(args.out, tidal_settings_from_args(args))}")
         return 0
     from planner.forecast.synthetic.scb import SyntheticSettings, write_synthetic
 
@@ -156,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"  synthesising {args.hours} h of the Southern California Bight forecast ({which})", file=sys.stderr,
           flush=True)
     path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
-    print(f"wrote {path}")
+    say(f"wrote {path}")
     return 0
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from planner.cli.cluster_options import add_cluster_arguments
 from planner.contract.arguments import Subcommands
+from planner.contract.columns import say
 from planner.contract.errors import ShoreError
 
 
@@ -35,21 +36,21 @@ def run(args: argparse.Namespace) -> int:
     note = None if args.quiet else (lambda text: print(f"  {text}", file=sys.stderr, flush=True))
     rows = run_holdout(args.mission, args.ensemble, starts=args.starts, seed=args.seed, dt_s=args.dt_s,
                        max_time_s=args.max_hours * 3600.0, scheduler=args.scheduler, workers=args.workers, note=note)
-    print(f"{'held out':>8} {'starts':>6} {'ensemble':>9} {'best single':>11} {'mean single':>11} {'worst single':>12}")
+    say(f"{'held out':>8} {'starts':>6} {'ensemble':>9} {'best single':>11} {'mean single':>11} {'worst single':>12}")
     for r in rows:
-        print(f"{r.held_out:>8} {r.starts:>6} {r.ensemble_success:>9.1%} {r.best_single:>11.1%} {r.mean_single:>11.1%}"
-              f" {min(r.single_success.values()):>12.1%}")
+        say(f"{r.held_out:>8} {r.starts:>6} {r.ensemble_success:>9.1%} {r.best_single:>11.1%} {r.mean_single:>11.1%}"
+            f" {min(r.single_success.values()):>12.1%}")
     per_member: dict[int, list[float]] = {}
     for r in rows:
         for j, v in r.single_success.items():
             per_member.setdefault(j, []).append(v)
-    print("single     " + ", ".join(f"member {j} {sum(v) / len(v):.1%}" for j, v in sorted(per_member.items()))
-          + " (each plan's mean over the members it did not see)")
+    say("single     " + ", ".join(f"member {j} {sum(v) / len(v):.1%}" for j, v in sorted(per_member.items()))
+        + " (each plan's mean over the members it did not see)")
     ens = sum(r.ensemble_success for r in rows) / len(rows)
     single = sum(r.mean_single for r in rows) / len(rows)
     beaten = sum(1 for r in rows for v in r.single_success.values() if r.ensemble_success > v)
     ties = sum(1 for r in rows for v in r.single_success.values() if r.ensemble_success == v)
     total = sum(len(r.single_success) for r in rows)
-    print(f"mean       ensemble {ens:.1%}, single-member plans {single:.1%}; the ensemble plan did better than "
-          f"{beaten} and as well as {ties} of {total} single-member plans in the member they did not see")
+    say(f"mean       ensemble {ens:.1%}, single-member plans {single:.1%}; the ensemble plan did better than "
+        f"{beaten} and as well as {ties} of {total} single-member plans in the member they did not see")
     return 0

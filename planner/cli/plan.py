@@ -17,6 +17,7 @@ from typing import Any
 
 from planner.cli.cluster_options import add_cluster_arguments
 from planner.contract.arguments import Subcommands, floats
+from planner.contract.columns import say
 from planner.contract.errors import GoalError, LrauvError
 
 COST_NAMES = ("drift", "forward", "rotate", "glide")
@@ -116,15 +117,15 @@ def run(args: argparse.Namespace) -> int:
     data = result.table.to_bytes(compress=not args.no_compress)
     write_atomic(out, data)
     for line in summary_lines(result, out=out, size=len(data)):
-        print(line)
+        say(line)
     start = None if args.start is None else start_state(result, args.start)
     if start is not None:
-        print(start_line(result, args.start, start))
-    print(time_line(result, time.perf_counter() - t0))
+        say(start_line(result, args.start, start))
+    say(time_line(result, time.perf_counter() - t0))
     if args.export_values:
         history = shlex.join(["lrauv", *sys.argv[1:]]) if sys.argv[1:2] == ["plan"] else "lrauv plan"
         mission_file = None if mission is None else str(mission.path)
-        print(f"values     {export_values(result, args.export_values, mission=mission_file, history=history)}")
+        say(f"values     {export_values(result, args.export_values, mission=mission_file, history=history)}")
     if args.plot:
         from planner.shore.plots import default_start, moment_of_plan, plot_all
 
@@ -138,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
                          layer=layer, when=moment_of_plan(result),
                          start_lon_lat=None if args.start is None else (args.start[0], args.start[1]))
         for p in paths:
-            print(f"picture    {p}")
+            say(f"picture    {p}")
     return 0
 
 
@@ -158,8 +159,8 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     if forecast_path is None and mission is not None:
         forecast_path = mission_forecast(mission, cache_dir=args.cache_dir)
         if mission.forecast.synthetic_seed is not None:  # say where the generated file is: never beside the mission
-            print(f"cache      synthetic forecast (seed {mission.forecast.synthetic_seed}, "
-                  f"{mission.forecast.synthetic_hours} h) {forecast_path}")
+            say(f"cache      synthetic forecast (seed {mission.forecast.synthetic_seed}, "
+                f"{mission.forecast.synthetic_hours} h) {forecast_path}")
         if time_index is None and time_iso is None:
             time_index, time_iso = mission.forecast.time_index, mission.forecast.time_iso
         variables = variables or mission.forecast.variables
@@ -244,7 +245,7 @@ def local_forecast(source: str, cache_dir: Path | None) -> Path:
     if not is_url(source):
         return Path(source)
     fetched = fetch(source, cache_dir)
-    print(f"cache      {fetched.describe()}")
+    say(f"cache      {fetched.describe()}")
     return fetched.path
 
 

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from planner.contract.errors import LrauvError
+from planner.contract.columns import say
 
 _MAX_LISTED = 20  # audit differences printed in full
 EXIT_AUDIT_DIFFERS = 1
@@ -82,13 +82,13 @@ def _replay(args: argparse.Namespace) -> int:
         log = open_dive(args.log, meter=meter)
         dive = load_dive(log, meter=meter)
     if len(dive.track) == 0:
-        print(f"log        {log.path}: {log.where_it_ends()}")
+        say(f"log        {log.path}: {log.where_it_ends()}")
         raise LrauvError(f"{log.path}: the log holds no decision: the executive never had a position to act on")
     tables = logged_tables(log)
     plans, nominal, note = _plans(dive, tables, args.forecast)
     summary = summarise(dive, nominal=nominal, nominal_note=note)
     text = format_summary(summary)
-    print(text, flush=True)
+    say(text, flush=True)
     status = 0
     verdict = None
     if not args.no_audit:
@@ -98,18 +98,18 @@ def _replay(args: argparse.Namespace) -> int:
         except LogError as exc:  # some of the audit's say what is wrong, not in which file
             raise exc if str(log.path) in str(exc) else LogError(f"{log.path}: {exc}") from None
         verdict = summary_line(result)
-        print(verdict)
+        say(verdict)
         for m in result.mismatches[:_MAX_LISTED]:
-            print(f"  {m.describe()}")
+            say(f"  {m.describe()}")
         if len(result.mismatches) > _MAX_LISTED:
-            print(f"  ... and {len(result.mismatches) - _MAX_LISTED:,} more")
+            say(f"  ... and {len(result.mismatches) - _MAX_LISTED:,} more")
         status = 0 if result.clean else EXIT_AUDIT_DIFFERS
     written = _exports(args, dive)
     if args.tlog is not None:
         from planner.shore.replay.tlog import write_tlog
 
         tlog = write_tlog(log, args.tlog, first_offset_s=dive.unix_offset_s)
-        print(f"tlog       {tlog.describe()}")
+        say(f"tlog       {tlog.describe()}")
         written.append(tlog.path)
     if args.layout is not None:
         from planner.shore.replay.layout import write_layout
@@ -122,8 +122,8 @@ def _replay(args: argparse.Namespace) -> int:
         written.append(write_report(dive, args.report, tables=tables, plan=first, summary_text=text,
                                     audit_text=verdict, exports=list(written)))
     for path in written:
-        print(f"wrote      {path}")
-    print(f"replay     {time.perf_counter() - t0:.1f} s", flush=True)
+        say(f"wrote      {path}")
+    say(f"replay     {time.perf_counter() - t0:.1f} s", flush=True)
     if args.mavlink is not None:
         _restream(log, args.mavlink, args.speed)
     if log.damage():  # what could be read was; the gap makes it a broken log, not an audit verdict
@@ -183,8 +183,8 @@ def _restream(log: Any, address: str, speed: float) -> None:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    print(f"restream   to {address} at {speed:g}x (Ctrl-C stops)", flush=True)
+    say(f"restream   to {address} at {speed:g}x (Ctrl-C stops)", flush=True)
     r = restream(log, address, speed=speed, stop=stop)
     skipped = ", ".join(f"{k} ({v})" for k, v in r.skipped.items()) if r.skipped else "none"
-    print(f"restream   {r.messages_sent:,} messages, {r.vehicle_s / 3600:.2f} h of vehicle time in {r.wall_s:.1f} s;"
-          f" skipped {skipped}", file=sys.stdout, flush=True)
+    say(f"restream   {r.messages_sent:,} messages, {r.vehicle_s / 3600:.2f} h of vehicle time in {r.wall_s:.1f} s;"
+        f" skipped {skipped}", flush=True)

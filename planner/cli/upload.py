@@ -24,14 +24,15 @@ def add_parser(sub: Subcommands) -> None:
     up.add_argument("--signing-key-file", type=Path, metavar="KEY",
                     help="MAVLink 2 signing key (32 bytes, or 64 hex digits) to sign with"
                          " (default: the mission's signing section; docs/missions.md)")
-    up.add_argument("--quiet", action="store_true")
+    up.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.contract.columns import fit, say as print_fitted
     from planner.shore.upload import upload_mission
 
-    say = None if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
-    report = None if args.quiet else print  # the summary of each goal planned on shore, as `lrauv plan` prints it
+    say = None if args.quiet else (lambda text: print(fit(text), file=sys.stderr, flush=True))
+    report = None if args.quiet else print_fitted  # the summary of each goal planned on shore, as `lrauv plan` prints it
     upload_mission(args.mission, to=args.to, tables=args.table, forecast=args.forecast, target_system=args.target_system,
                    target_component=args.target_component, timeout_s=args.timeout_s,
                    signing_key_file=args.signing_key_file, say=say, report=report)

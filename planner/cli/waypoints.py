@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from planner.contract.arguments import floats
+from planner.contract.columns import say
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -36,8 +37,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.waypoints_command == "export":
         path, n_goals = export_waypoints(args.mission, args.out, home=args.home)
-        print(f"wrote {path} (home and {n_goals} goal{'s' if n_goals != 1 else ''})")
+        say(f"wrote {path} (home and {n_goals} goal{'s' if n_goals != 1 else ''})")
         return 0
     path, n_goals = import_waypoints(args.file, args.mission, args.out)
-    print(f"wrote {path} ({n_goals} goal{'s' if n_goals != 1 else ''} from {args.file})")
+    say(f"wrote {path} ({n_goals} goal{'s' if n_goals != 1 else ''} from {args.file})")
     return 0

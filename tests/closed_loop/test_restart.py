@@ -92,7 +92,8 @@ def test_kill_9_then_resume_goes_on_to_the_active_goal(demo_plan, synthetic_fore
         stop_process(sim)
     out = again.stdout
     assert again.returncode == 0, out + again.stderr
-    assert f"resumed    from {state_dir}" in out and "goal 1 of 2" in out and "recovered into" in out, out
+    words = " ".join(out.split())  # lines over 100 columns wrap under their value
+    assert f"resumed from {state_dir}" in words and "goal 1 of 2" in words and "recovered into" in words, out
     assert "goal       reached" in out, out
 
     # The killed run's log, recovered up to its last complete record.

@@ -109,6 +109,7 @@ def test_batch_command_with_scheduler_address_writes_every_goal(cluster, files, 
     assert rc == 0, out
     written = sorted(p.relative_to(tmp_path / "out").as_posix() for p in (tmp_path / "out").rglob("*.lrpt"))
     assert written == ["alpha/goal-0.lrpt", "alpha/goal-1.lrpt", "beta/goal-0.lrpt", "beta/goal-1.lrpt"]
+    assert max(len(line) for line in out.splitlines()) <= 100, out  # labelled lines wrap under their value
     single = plan_item(BatchItem(vehicle="x", goal_index=1, request=collect([files["paper"]], tmp_path, None)[1].request,
                                  out=tmp_path / "x.lrpt"))
     assert (tmp_path / "out" / "beta" / "goal-1.lrpt").read_bytes() == single.table
@@ -263,3 +264,4 @@ def test_holdout_command_compares_ensemble_and_single_member_plans(ensemble, fil
     rows = [line.split() for line in out.splitlines() if line.strip() and line.split()[0].isdigit()]
     assert [r[0] for r in rows] == ["0", "1", "2"] and all(r[1] == "3" for r in rows)
     assert "ensemble" in out and "single-member plans" in out
+    assert max(len(line) for line in out.splitlines()) <= 100, out

@@ -150,9 +150,10 @@ def test_lrauv_plan_physical_writes_table_values_pictures_and_a_summary(physical
     assert sorted(p.name for p in pictures.iterdir()) == ["flow_fields.png", "nominal_path.png", "policy_k0_l0.png"]
     out = proc.stdout
     assert "model      physical, expected; costs in Wh" in out
-    assert "state-actions" in out and "samples per action" in out and "finer than the grid" in out
-    assert "policy iteration:" in out and "iterations, residual" in out
-    start = next(line for line in out.splitlines() if line.startswith("start "))
+    words = " ".join(out.split())  # lines over 100 columns wrap under their value
+    assert "state-actions" in words and "samples per action" in words and "finer than the grid" in words
+    assert "policy iteration:" in words and "iterations, residual" in words
+    start = words.split(" start (", 1)[1].split(" time ", 1)[0]
     assert " Wh, " in start and " h to go (expected)" in start, start
 
 

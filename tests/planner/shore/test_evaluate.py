@@ -121,11 +121,14 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
     assert rc == 0, printed.err
     assert "Traceback" not in printed.err
 
-    # The table: one row per method, each with n runs.
-    rows = {line.split()[0]: line.split() for line in printed.out.splitlines()
-            if line.split() and line.split()[0] in METHODS}
-    assert sorted(rows) == sorted(DEFAULT_METHODS)
-    assert all(int(r[1]) == n for r in rows.values()), printed.out
+    # Two tables (runs by outcome, then figures), each with one row per method; n runs each; 100 columns at most.
+    counts, figures = printed.out.split("\n\n")[:2]
+    for table in (counts, figures):
+        rows = {line.split()[0]: line.split() for line in table.splitlines() if line.split()[0] in METHODS}
+        assert sorted(rows) == sorted(DEFAULT_METHODS), table
+    rows = {line.split()[0]: line.split() for line in counts.splitlines() if line.split()[0] in METHODS}
+    assert all(int(r[1]) == n and sum(map(int, r[3:])) == n for r in rows.values()), printed.out
+    assert max(len(line) for line in printed.out.splitlines()) <= 100, printed.out
 
     # runs.csv: starts x methods rows, the documented columns, every outcome a known one.
     with open(out / "runs.csv", newline="") as f:

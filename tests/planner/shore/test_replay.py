@@ -210,9 +210,10 @@ def test_the_audit_checks_the_slices_of_a_time_varying_plan(timed_dive_log, time
     assert result.time_varying == (f"{crc}: time-varying, 3 slices from 2026-01-15T00:02:00Z to 2026-01-15T00:15:00Z",)
     assert lrauv(["replay", str(timed_dive_log)]) == 0
     out = capsys.readouterr().out
-    assert (f"  loaded     goal 0, table {crc}: time-varying, 3 slices from 2026-01-15T00:02:00Z to"
-            " 2026-01-15T00:15:00Z") in out
-    assert f"{len(decisions):,} decisions under a time-varying table, each slice checked" in out
+    words = " ".join(out.split())  # lines over 100 columns wrap under their value
+    assert (f"loaded goal 0, table {crc}: time-varying, 3 slices from 2026-01-15T00:02:00Z to"
+            " 2026-01-15T00:15:00Z") in words, out
+    assert f"{len(decisions):,} decisions under a time-varying table, each slice checked" in words, out
 
 
 def _with_slice(victim: int, slice_index: int) -> Callable[[str, Message], bytes]:
@@ -261,7 +262,8 @@ def test_a_truncated_log_replays_up_to_the_cut_and_says_where_it_ends(dive_log, 
     code = lrauv(["replay", str(cut)])
     out = capsys.readouterr().out
     assert code == 0, out
-    assert f"TRUNCATED: the writer did not finish (killed?); read up to byte {recovered.truncated_at_byte:,}" in out
+    words = " ".join(out.split())  # lines over 100 columns wrap under their value
+    assert f"TRUNCATED: the writer did not finish (killed?); read up to byte {recovered.truncated_at_byte:,}" in words
     assert f"decisions  {len(expected):,}" in out
     assert f"audit      {len(expected):,} decisions run again" in out and "no difference" in out
 
