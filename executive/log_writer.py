@@ -1,6 +1,6 @@
 """Writing the MCAP log off the control loop, and surviving a full, slow or failing disk.
 
-``PendingFile`` is the stream ``mcap.Writer`` writes into: bytes wait in memory and go
+``PendingFile`` is the stream ``executive.mcap_file.McapFileWriter`` writes into: bytes wait in memory and go
 to the file in ``push``. A write the disk refuses (``ENOSPC``, ``EIO``) raises there and
 keeps the bytes not yet written, so the file stays a clean prefix of the log and the
 next ``push`` goes on from exactly where the last one stopped: the log stays readable
@@ -22,18 +22,15 @@ from __future__ import annotations
 import errno
 import logging
 import os
-import struct
-import tempfile
 import threading
 from collections import deque
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 from executive.state import Event
 
-__all__ = ["Background", "ChunkIndexSpool", "Flush", "PendingFile", "Sink", "reason_of", "spool_chunk_indexes"]
+__all__ = ["Background", "Flush", "PendingFile", "Sink", "reason_of"]
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +52,7 @@ class PendingFile:
         self._pending = bytearray()
         self.written = 0  # bytes in the file: always a prefix of what was written here
 
-    # -- the stream mcap.Writer uses -------------------------------------------------------------
+    # -- the stream the MCAP writer uses ---------------------------------------------------------
 
     def write(self, data: bytes | bytearray | memoryview) -> int:
         self._pending += data
@@ -63,9 +60,6 @@ class PendingFile:
 
     def tell(self) -> int:
         return self.written + len(self._pending)
-
-    def flush(self) -> None:
-        """Nothing: ``mcap.Writer.flush`` calls it; the caller pushes when it chooses."""
 
     # -- to the disk ------------------------------------------------------------------------------
 
@@ -97,95 +91,6 @@ class PendingFile:
 
     def close(self) -> None:
         self._file.close()
-
-
-class ChunkIndexSpool:
-    """``mcap.Writer``'s chunk indexes, kept in an unlinked temporary file instead of in memory.
-
-    ``mcap.Writer`` keeps one ``ChunkIndex`` per chunk until ``finish`` writes them into the
-    summary. The loop flushes a chunk every second of wall time, so at sea (1x) that is 86,400
-    indexes a vehicle day, several kB each in Python objects: the soak (bench/bench_soak.py)
-    saw the executive grow 5 MB a day at 1000x. Here each index is its record's bytes on disk,
-    read back once at ``finish``; memory stays flat however long the mission. When the disk
-    refuses a write (full), the indexes from then on are held in memory instead (a few
-    hundred bytes a chunk), so the log can still be finished when the disk comes back.
-    """
-
-    def __init__(self, directory: Path) -> None:
-        self._file: Any = None
-        try:
-            self._file = tempfile.TemporaryFile(dir=directory, buffering=0)  # noqa: SIM115 (closed in close()); unlinked
-        except OSError:
-            pass
-        self._size = 0  # bytes of whole records in the file
-        self._held: list[Any] = []
-        self.count = 0
-
-    def append(self, index: Any) -> None:
-        from mcap.data_stream import RecordBuilder
-
-        self.count += 1
-        if self._file is None or self._held:
-            self._held.append(index)
-            return
-        builder = RecordBuilder()
-        index.write(builder)
-        data = memoryview(builder.end())
-        done = 0
-        try:
-            while done < len(data):
-                done += self._file.write(data[done:]) or 0
-        except OSError:
-            self._held.append(index)  # the disk is full: from now on in memory
-            try:
-                self._file.truncate(self._size)
-                self._file.seek(self._size)
-            except OSError:
-                pass  # reads stop at _size anyway
-            return
-        self._size += done
-
-    def __len__(self) -> int:
-        return self.count
-
-    def __iter__(self) -> Iterator[Any]:
-        if self._file is not None and self._size:
-            self._file.seek(0)
-            data = b""
-            while len(data) < self._size:
-                block = self._file.read(self._size - len(data))
-                if not block:
-                    break
-                data += block
-            self._file.seek(self._size)
-            at = 0
-            while at + 9 <= len(data):
-                _opcode, length = struct.unpack_from("<BQ", data, at)
-                yield _RawRecord(data[at:at + 9 + length])
-                at += 9 + length
-        yield from self._held
-
-    def close(self) -> None:
-        if self._file is not None:
-            self._file.close()
-
-
-@dataclass(frozen=True, slots=True)
-class _RawRecord:
-    data: bytes
-
-    def write(self, builder: Any) -> None:
-        builder.write(self.data)
-
-
-def spool_chunk_indexes(writer: Any, directory: Path) -> ChunkIndexSpool | None:
-    """Put a spool in place of the writer's in-memory list (mcap 1.x keeps it in ``__chunk_indices``)."""
-    name = "_Writer__chunk_indices"
-    if not isinstance(getattr(writer, name, None), list):
-        return None  # another mcap version: the indexes stay in memory, the log is the same
-    spool = ChunkIndexSpool(directory)
-    setattr(writer, name, spool)
-    return spool
 
 
 class Sink(Protocol):

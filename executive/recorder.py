@@ -30,17 +30,18 @@ import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, BinaryIO, Self, cast
+from typing import Any, BinaryIO, Self
 
 from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
-from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, IndexType, Writer
+from mcap.writer import LIBRARY_IDENTIFIER
 
 from executive.log_clock import ClockSource, LogClock
 from executive.log_records import BoundedRecords, LogError
 from executive.log_topics import (BOOT_TIME_KEY, NS_PER_S, LogLevel, LogLevelName, Topic, boot_time_of, encode,
                                   foxglove_time, level_code, time_ns)
-from executive.log_writer import Background, Flush, PendingFile, reason_of, spool_chunk_indexes
+from executive.log_writer import Background, Flush, PendingFile, reason_of
+from executive.mcap_file import ChunkIndexSpool, Compression, McapFileWriter
 from executive.state import Event
 from planner.contract.atomic import atomic_target
 
@@ -55,10 +56,9 @@ _LIBRARY = f"lrauv executive.recorder; {LIBRARY_IDENTIFIER}"
 # state, fix, decision; 100k messages, 64 KiB chunks) the file was 5.5 MB with ZSTD, 7.6 MB with
 # LZ4 and 28.6 MB uncompressed, and neither costs a measurable share of write()'s ~11 us
 # (compression runs once per chunk). Disk on a multi-day mission is the scarcer resource.
-_COMPRESSION = CompressionType.ZSTD
-# All indexes (mcap's advice "if in doubt, choose ALL"). Message indexes are ~30% of the file
-# (16 bytes a message, uncompressed) but let readers skip chunks without a wanted topic.
-_INDEXES = IndexType.ALL
+_COMPRESSION: Compression = "zstd"
+# All indexes (executive.mcap_file; mcap's advice "if in doubt, choose ALL"). Message indexes are
+# ~30% of the file (16 bytes a message, uncompressed) but let readers skip chunks without a wanted topic.
 
 
 # -- writing -----------------------------------------------------------------------------
@@ -89,9 +89,10 @@ class Recorder:
             self._file = PendingFile(self.path)
         except OSError as exc:
             raise LogError(f"{self.path}: cannot open the log for writing: {exc.strerror or exc}") from None
-        self._writer = Writer(cast(IO[Any], self._file), chunk_size=chunk_size, compression=_COMPRESSION, index_types=_INDEXES,
-                              use_statistics=True, use_summary_offsets=True, enable_crcs=True)
-        self._chunk_indexes = spool_chunk_indexes(self._writer, self.path.parent)
+        # A chunk a second for weeks: their indexes wait on disk for the summary, not in memory.
+        self._chunk_indexes = ChunkIndexSpool(self.path.parent)
+        self._writer = McapFileWriter(self._file, chunk_size=chunk_size, compression=_COMPRESSION,
+                                      chunk_indexes=self._chunk_indexes)
         self._flush_interval_s = float(flush_interval_s)
         self._close_timeout_s = float(close_timeout_s)
         self._channel_ids: dict[Topic, int] = {}
@@ -120,6 +121,7 @@ class Recorder:
                 self._disk("write", self.push)
         except BaseException:
             self._file.close()
+            self._chunk_indexes.close()
             raise
 
     # -- messages ---------------------------------------------------------------------
@@ -364,13 +366,12 @@ class Recorder:
         try:
             if not self._finished:
                 self._finished = True
-                self._writer.finish()
+                self._writer.finish(drain=self._file.push)
             self._file.push()
             self._file.sync()
         finally:
             self._file.close()
-            if self._chunk_indexes is not None:
-                self._chunk_indexes.close()
+            self._chunk_indexes.close()
 
     # -- internals ------------------------------------------------------------------------------
 
@@ -545,13 +546,14 @@ def recover(src: str | os.PathLike[str], dst: str | os.PathLike[str] | None = No
 
 def _copy_records(f: BinaryIO, size: int, source: Path, out: BinaryIO) -> dict[str, Any]:
     stream = BoundedRecords(f, size, source, oversized="drop")
-    writer: Writer | None = None
+    writer: McapFileWriter | None = None
     schema_ids: dict[int, int] = {0: 0}
     channel_ids: dict[int, int] = {}
     messages, last_ns, last_data = 0, None, b""
     for r in stream:
         if isinstance(r, Header):
-            writer = Writer(out, chunk_size=1024 * 1024, compression=_COMPRESSION, enable_crcs=True)
+            # Chunks of 1 MiB: few enough that their indexes stay in memory for this short run.
+            writer = McapFileWriter(out, chunk_size=1024 * 1024, compression=_COMPRESSION)
             writer.start(r.profile, f"{r.library} (recovered by {_LIBRARY})")
             continue
         if writer is None:
