@@ -7,12 +7,13 @@ whole whenever it changes (``executive.plan_changes``) and replaces the one befo
 - geofence: the safety section's polygon (an empty collection when the mission has none);
 - plan: the running plan, i.e. the active goal's table: its grid's extent, its land (layer 0,
   one rectangle per run of land cells along a row) and its goal cells (within the goal radius,
-  Chebyshev, of the goal's cell: spec section 6), and the goal it steers to.
+  Chebyshev, of the goal's cell: spec section 6), the goal it steers to, and its nominal path
+  from the start it was planned with, where the table carries one (``lrauv plan --start``).
 
 Positions are ``[lon, lat]`` (RFC 7946 section 3.1.1); polygons are closed, exteriors
 counter-clockwise (section 3.1.6). Pure functions of the plan; standard library and the
-policy table only. The nominal path is not drawn: it needs the planning forecast, which the
-executive does not keep (the replay report draws it, ``planner.shore.replay``).
+policy table only. The nominal path comes with the table, worked out on shore from the planning
+forecast, which the executive does not keep: a plan made on board has none.
 """
 
 from __future__ import annotations
@@ -75,6 +76,10 @@ def plan_layer(plan: MissionPlan | None) -> Json:
     features.append(_feature({"type": "Point", "coordinates": [table.goal_lon_deg, table.goal_lat_deg]},
                              {"name": f"goal {plan.index} (running)", "depth_m": table.goal_depth_m,
                               "table_crc32": crc}))
+    if len(table.nominal_path) >= 2:
+        features.append(_feature({"type": "LineString", "coordinates": [list(p) for p in table.nominal_path]},
+                                 {"name": "nominal path", "source": "planned on shore from its start",
+                                  "vertices": len(table.nominal_path), "table_crc32": crc}))
     return _collection(features)
 
 

@@ -114,11 +114,16 @@ def run(args: argparse.Namespace) -> int:
         if mission is None or args.goal is not None:
             raise
         raise GoalError(f"{mission.goals[0].where}: {exc}") from None
-    data = result.table.to_bytes(compress=not args.no_compress)
+    start = None if args.start is None else start_state(result, args.start)
+    table = result.table
+    if start is not None:  # the vehicle shows it on its map (executive.map_layers)
+        from planner.shore.plots.solutions import nominal_lon_lat
+
+        table = replace(table, nominal_path=nominal_lon_lat(result.solution, start, (args.start[0], args.start[1])))
+    data = table.to_bytes(compress=not args.no_compress)
     write_atomic(out, data)
     for line in summary_lines(result, out=out, size=len(data)):
         say(line)
-    start = None if args.start is None else start_state(result, args.start)
     if start is not None:
         say(start_line(result, args.start, start))
     say(time_line(result, time.perf_counter() - t0))

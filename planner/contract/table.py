@@ -108,6 +108,10 @@ class PolicyTable:
     # is the first slice. Empty and None for a stationary plan.
     slice_times: tuple[str, ...] = ()
     slices: NDArray[np.uint8] | None = field(default=None, repr=False)
+    # Where the plan expects the vehicle to go from the start it was planned with (``lrauv plan
+    # --start``): (lon, lat) vertices, the real start first (spec section 5's nominal outcomes; for
+    # a physical plan the most likely ones). Shown on the vehicle's map; empty when not planned.
+    nominal_path: tuple[tuple[float, float], ...] = ()
     # Derived from the geometry in __post_init__, for the per-message lookups.
     _bearings: NDArray[np.float64] = field(init=False, repr=False, compare=False)
     _bearing_rows: tuple[tuple[float, ...], ...] = field(init=False, repr=False, compare=False)
@@ -384,6 +388,8 @@ class PolicyTable:
             out["physical"] = {part: dict(values) for part, values in self.physical.items()}
         if self.slices is not None:  # version 2 only
             out["time"] = {"slices_utc": list(self.slice_times), "lookup": "nearest"}
+        if self.nominal_path:  # optional: a table planned without a start keeps the bytes it always had
+            out["nominal_path"] = {"lon_lat_deg": [list(point) for point in self.nominal_path]}
         return out
 
     # -- bytes ----------------------------------------------------------------------
@@ -634,6 +640,9 @@ def _header_fields(header: Any) -> dict[str, Any]:
         if _key(time_part, "lookup", "time") != "nearest":
             raise TableError(f"time.lookup: expected \"nearest\"; got {time_part['lookup']!r}"[:200])
         fields["slice_times"] = tuple(times)
+    if "nominal_path" in top:  # optional; older readers never saw it
+        fields["nominal_path"] = _lon_lat_points(_key(_section(top["nominal_path"], "nominal_path"), "lon_lat_deg",
+                                                      "nominal_path"), "nominal_path.lon_lat_deg")
     if "physical" in top:  # optional (physical plans); older readers never saw it
         physical = _section(top["physical"], "physical")
         fields["physical"] = {}
@@ -644,6 +653,24 @@ def _header_fields(header: Any) -> dict[str, Any]:
                                         else None if v is None and part == "sampling" else
                                         _number(v, f"physical.{part}.{k}") for k, v in values.items()}
     return fields
+
+
+MAX_PATH_POINTS = 10_000
+
+
+def _lon_lat_points(value: Any, key: str) -> tuple[tuple[float, float], ...]:
+    """A list of [lon, lat] pairs in degrees (at most MAX_PATH_POINTS), each within range."""
+    if not isinstance(value, list) or len(value) > MAX_PATH_POINTS:
+        raise TableError(f"{key}: expected a list of at most {MAX_PATH_POINTS:,} [lon, lat] pairs; got {value!r}"[:200])
+    points = []
+    for n, point in enumerate(value):
+        if not isinstance(point, list) or len(point) != 2:
+            raise TableError(f"{key}[{n}]: expected [lon, lat] in degrees; got {point!r}"[:200])
+        lon, lat = _float(point[0], f"{key}[{n}][0]"), _float(point[1], f"{key}[{n}][1]")
+        if not (-180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):
+            raise TableError(f"{key}[{n}]: ({lon:g}, {lat:g}) is not a longitude in [-180, 180] and a latitude in [-90, 90]")
+        points.append((lon, lat))
+    return tuple(points)
 
 
 def _section(value: Any, key: str) -> dict[str, Any]:

@@ -112,7 +112,9 @@ def test_jitter_keeps_the_offset_and_a_reboot_steps_it(tmp_path):
 def test_the_loop_logs_at_the_autopilots_utc_with_heading_and_map_layers(demo_plan, tmp_path):
     table = demo_plan.table
     g = goal_tables.single(table).goals[0]
-    plan = goal_tables.MissionPlan(goals=(g, g), tables=(table, table))  # two goals, to swap between
+    # The second goal's table carries a nominal path (lrauv plan --start): it is drawn once that plan runs.
+    path = ((-118.0, 33.5), (-117.9, 33.45), (table.goal_lon_deg, table.goal_lat_deg))
+    plan = goal_tables.MissionPlan(goals=(g, g), tables=(table, replace(table, nominal_path=path)))
     v = Vehicle(table, tmp_path / "single.mcap")
     v.executive.close()
     v.executive = Executive(replace(v.executive.config, log_path=tmp_path / "exec.mcap"), plan)
@@ -152,5 +154,6 @@ def test_the_loop_logs_at_the_autopilots_utc_with_heading_and_map_layers(demo_pl
     assert [[f["properties"]["active"] for f in g["features"]] for g in goals] == [[True, False], [False, True]]
     assert goals[0]["features"][0]["geometry"]["coordinates"] == [table.goal_lon_deg, table.goal_lat_deg]  # lon, lat
     plans = layers["/map/plan"]  # written again at the swap: Foxglove shows the latest
-    assert [[f["properties"]["name"] for f in p["features"]][-1] for p in plans] == ["goal 0 (running)",
-                                                                                     "goal 1 (running)"]
+    assert [[f["properties"]["name"] for f in p["features"]][-2:] for p in plans] == [
+        ["goal cells", "goal 0 (running)"], ["goal 1 (running)", "nominal path"]]
+    assert plans[1]["features"][-1]["geometry"] == {"type": "LineString", "coordinates": [list(p) for p in path]}

@@ -2,7 +2,7 @@
 // Writes the Foxglove well-known JSON schemas the executive's log uses, exactly as the official
 // package exports them (@foxglove/schemas, pinned in package.json: dist/jsonschema), into
 // executive/foxglove_schemas/NAME.json, which executive/log_topics.py loads at import.
-// Run it after changing the pinned version; tests/planner/shore/test_foxglove_schemas.py checks
+// Run it after changing the pinned version; tests/planner/shore/test_foxglove_log.py checks
 // that the vendored files equal the package's.
 //
 //   node tests/node/foxglove_schemas.mjs            write the files

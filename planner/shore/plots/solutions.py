@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 
     AnySolution = Solution | PhysicalSolution
 
-__all__ = ["NominalStep", "is_physical", "nominal_displacement", "nominal_steps"]
+__all__ = ["NominalStep", "is_physical", "nominal_displacement", "nominal_lon_lat", "nominal_steps"]
 
 
 class NominalStep(Protocol):
@@ -67,6 +67,30 @@ def nominal_steps(
     from planner.paper.solve import nominal_path
 
     return nominal_path(solution, start)
+
+
+def nominal_lon_lat(solution: AnySolution, start: tuple[int, int, int, int],
+                    start_lon_lat: tuple[float, float] | None = None) -> tuple[tuple[float, float], ...]:
+    """The nominal path as (lon, lat) vertices for a map: ``start_lon_lat`` (the real start) or the start
+    cell's centre, then the centre of each cell the path enters, the middle vertices of straight runs
+    left out; to 1e-6 degrees (about 0.1 m), so that the table carrying it stays small."""
+    grid = solution.model.grid
+    cells: list[tuple[int, int]] = []
+    for step in nominal_steps(solution, start):
+        if not cells or cells[-1] != (step.j, step.i):
+            cells.append((step.j, step.i))
+    points = [(float(grid.lon_deg[i]), float(grid.lat_deg[j])) for j, i in cells]
+    if start_lon_lat is not None:
+        points[0] = (float(start_lon_lat[0]), float(start_lon_lat[1]))
+    kept = points[:1]
+    for n in range(1, len(points) - 1):
+        straight = (cells[n][0] - cells[n - 1][0], cells[n][1] - cells[n - 1][1]) == (
+            cells[n + 1][0] - cells[n][0], cells[n + 1][1] - cells[n][1])
+        if not straight or n == 1:  # the first cell's centre stays: the real start is off it
+            kept.append(points[n])
+    if len(points) > 1:
+        kept.append(points[-1])
+    return tuple((round(lon, 6), round(lat, 6)) for lon, lat in kept)
 
 
 def nominal_displacement(solution: AnySolution, l: int, j: int, i: int, k: int, a: Action) -> tuple[int, int]:

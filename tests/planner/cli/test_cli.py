@@ -157,3 +157,27 @@ def test_only_the_named_subcommand_module_is_imported():
              " and m != 'planner.cli.help_text')))")  # the help table: argparse only
     proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=REPO, check=True)
     assert proc.stdout.splitlines()[-1] == "loaded: ", proc.stdout
+
+
+def test_a_plan_from_a_start_carries_its_nominal_path_to_the_vehicle(synthetic_forecast, tmp_path):
+    """``--start`` puts the nominal path in the table: from the real start to the goal's cell, in lon, lat."""
+    from planner.contract.table import PolicyTable
+
+    out, bare = tmp_path / "t.lrpt", tmp_path / "bare.lrpt"
+    common = ["plan", "--forecast", str(synthetic_forecast), "--bbox", "-118.26,33.30,-117.70,33.70", "--nx", "29",
+              "--ny", "21", "--depths", "0,5,10,15", "--goal", "-117.80,33.40,0"]
+    assert run(*common, "--start", "-118.0,33.51,0,90", "--out", str(out)).returncode == 0
+    assert run(*common, "--out", str(bare)).returncode == 0
+    table, plain = PolicyTable.load(out), PolicyTable.load(bare)
+    path = table.nominal_path
+    assert plain.nominal_path == () and "nominal_path" not in plain.header()
+    assert len(path) >= 3 and path[0] == (-118.0, 33.51)  # the real start, not its cell's centre
+    goal = table.locate(table.goal_lat_deg, table.goal_lon_deg, 0.0)
+    assert goal is not None
+    lat, lon = table.cell_centre(goal[1], goal[2])
+    assert abs(path[-1][0] - lon) <= table.dlon_deg * (table.goal_radius_cells + 0.5)
+    assert abs(path[-1][1] - lat) <= table.dlat_deg * (table.goal_radius_cells + 0.5)
+    # Each leg after the first joins two cell centres; the actions are the same table's.
+    assert all(abs((a - table.lon0_deg) / table.dlon_deg - round((a - table.lon0_deg) / table.dlon_deg)) < 1e-3
+               for a, _ in path[1:])
+    assert (table.actions == plain.actions).all()

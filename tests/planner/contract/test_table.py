@@ -286,3 +286,26 @@ def test_slices_that_barely_change_cost_little_more_than_one(demo_plan):
     few = len(table.with_slices(tuple(f"2026-01-15T{h:02d}:00:00Z" for h in range(10)),
                                 _slices(table, 10, np.random.default_rng(3))).to_bytes())
     assert same < few  # the deltas carry the changes, nothing else
+
+
+def test_a_nominal_path_round_trips_and_a_bad_one_is_refused(demo_plan):
+    from dataclasses import replace
+
+    path = ((-118.0, 33.51), (-117.95, 33.45), (-117.8, 33.4))
+    table = replace(demo_plan.table, nominal_path=path)
+    again = PolicyTable.from_bytes(table.to_bytes())
+    assert again.nominal_path == path and again.to_bytes() == table.to_bytes()
+    assert (again.actions == demo_plan.table.actions).all() and again.crc32 != demo_plan.table.crc32
+    timed = table.with_slices(("2026-01-15T00:00:00Z", "2026-01-15T01:00:00Z"),
+                              np.stack([table.actions, table.actions]))
+    assert PolicyTable.from_bytes(timed.to_bytes()).nominal_path == path  # a time-varying table carries it too
+    data = table.to_bytes(compress=False)
+    for bad, message in (([[-118.0]], r"nominal_path.lon_lat_deg\[0\]: expected \[lon, lat\]"),
+                         ([[-118.0, 95.0]], r"nominal_path.lon_lat_deg\[0\]: \(-118, 95\) is not"),
+                         ([["a", 33.0]], r"nominal_path.lon_lat_deg\[0\]\[0\]: expected a finite number"),
+                         ("path", "nominal_path.lon_lat_deg: expected a list")):
+        def header(h, bad=bad):  # type: ignore[no-untyped-def]
+            return {**h, "nominal_path": {"lon_lat_deg": bad}}
+
+        with pytest.raises(TableError, match=message):
+            PolicyTable.from_bytes(_rewritten(data, header=header), name="t.lrpt")
