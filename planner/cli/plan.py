@@ -115,12 +115,12 @@ def run(args: argparse.Namespace) -> int:
             raise
         raise GoalError(f"{mission.goals[0].where}: {exc}") from None
     start = None if args.start is None else start_state(result, args.start)
-    table = result.table
     if start is not None:  # the vehicle shows it on its map (executive.map_layers)
         from planner.shore.plots.solutions import nominal_lon_lat
 
-        table = replace(table, nominal_path=nominal_lon_lat(result.solution, start, (args.start[0], args.start[1])))
-    data = table.to_bytes(compress=not args.no_compress)
+        path = nominal_lon_lat(result.solution, start, (args.start[0], args.start[1]))
+        result = replace(result, table=replace(result.table, nominal_path=path))
+    data = result.table.to_bytes(compress=not args.no_compress)
     write_atomic(out, data)
     for line in summary_lines(result, out=out, size=len(data)):
         say(line)
@@ -155,7 +155,9 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     from planner.pipeline import PlanRequest, mission_forecast
 
     # Forecast: the flag (files or URLs, downloaded to the cache), else the mission's source.
-    sources = [local_forecast(s, args.cache_dir) for s in args.forecast or ()]
+    region = BBox(west_deg=args.bbox[0], south_deg=args.bbox[1], east_deg=args.bbox[2], north_deg=args.bbox[3]) \
+        if args.bbox else None if mission is None else mission.region.bbox
+    sources = [local_forecast(s, args.cache_dir, region) for s in args.forecast or ()]
     forecast_path = sources[0] if sources else None
     ensemble = tuple(sources[1:])
     time_index, time_iso = args.time_index, args.time
@@ -243,13 +245,16 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     )
 
 
-def local_forecast(source: str, cache_dir: Path | None) -> Path:
-    """A forecast argument as a file: an http(s) URL is downloaded to the cache (and said so), a path kept as given."""
-    from planner.forecast.remote import fetch, is_url
+def local_forecast(source: str, cache_dir: Path | None, bbox: Any = None) -> Path:
+    """A forecast argument as a file: an http(s) URL is downloaded to the cache (and said so), a path kept as given.
+
+    An OPeNDAP dataset URL: only the part that planning inside ``bbox`` reads (``planner.forecast.opendap``)."""
+    from planner.forecast.opendap import fetch_source
+    from planner.forecast.remote import is_url
 
     if not is_url(source):
         return Path(source)
-    fetched = fetch(source, cache_dir)
+    fetched = fetch_source(source, cache_dir, bbox=bbox)
     say(f"cache      {fetched.describe()}")
     return fetched.path
 

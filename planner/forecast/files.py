@@ -6,7 +6,6 @@ says so instead of reading zeros or failing with a bare "HDF error".
 
 from __future__ import annotations
 
-import hashlib
 import inspect
 import os
 import warnings
@@ -16,7 +15,8 @@ from typing import Any
 import xarray as xr
 
 from planner.contract.errors import ForecastError
-from planner.forecast.remote import fetch, is_url
+from planner.forecast.opendap import fetch_source
+from planner.forecast.remote import file_sha256, is_url
 
 # What netCDF4/xarray/pyproj raise on damaged or unexpected files; wrapped into ForecastError.
 LIBRARY_ERRORS = (
@@ -26,16 +26,12 @@ LIBRARY_ERRORS = (
 
 def file_identity(path: Path, label: str | None = None) -> str:
     """``sha256:`` + the first 16 hex characters of the SHA-256 of the file's bytes."""
-    digest = hashlib.sha256()
     try:
-        with path.open("rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                digest.update(block)
+        return file_sha256(path)
     except OSError as exc:
         raise ForecastError(
             f"{label or path}: cannot read the file ({exc.strerror or exc}); check the path and permissions"
         ) from exc
-    return "sha256:" + digest.hexdigest()[:16]
 
 
 # Lazily opened: no index is built from a coordinate at open time, so a damaged header that
@@ -51,10 +47,11 @@ _LAZY_OPEN: dict[str, Any] = (
 def open_dataset(path: str | os.PathLike[str], what: str) -> tuple[xr.Dataset, str, Path]:
     """(dataset, label, path) of a forecast or grid file, opened lazily after the completeness check.
 
-    An http(s) URL is read from its copy in the cache (``planner.forecast.remote``); the label stays the URL.
+    An http(s) URL is read from its copy in the cache (``planner.forecast.remote``; an OPeNDAP dataset's,
+    ``planner.forecast.opendap``); the label stays the URL.
     """
     label = os.fspath(path)
-    p = fetch(label).path if is_url(label) else Path(label)  # an http(s) URL: its copy in the cache
+    p = fetch_source(label).path if is_url(label) else Path(label)  # an http(s) URL: its copy in the cache
     if not p.exists():
         raise ForecastError(f"{label}: {what} not found; check the path")
     if not p.is_file():

@@ -45,7 +45,7 @@ def read_regular(
     )
     x0, x1, y0, y1 = 0, orient.lon.size, 0, orient.lat.size
     if want.bbox is not None:
-        x0, x1, y0, y1 = _regular_window(orient.lon, orient.lat, want.bbox, label)
+        x0, x1, y0, y1 = regular_window(orient.lon, orient.lat, want.bbox, label)
         part.append(
             f"lon {orient.lon[x0]:.6g}..{orient.lon[x1 - 1]:.6g} ({x1 - x0} of {orient.lon.size} points), "
             f"lat {orient.lat[y0]:.6g}..{orient.lat[y1 - 1]:.6g} ({y1 - y0} of {orient.lat.size})"
@@ -162,7 +162,7 @@ def _bracket(axis: NDArray[np.float64], lo: float, hi: float) -> tuple[int, int]
     return max(i0, 0), min(i1, axis.size - 1)
 
 
-def _regular_window(
+def regular_window(
     lon: NDArray[np.float64], lat: NDArray[np.float64], bbox: BBox, label: str
 ) -> tuple[int, int, int, int]:
     """``[x0, x1)`` and ``[y0, y1)`` of the nodes that resampling any grid inside ``bbox`` uses, plus the margin.

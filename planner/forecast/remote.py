@@ -8,9 +8,8 @@ URL, the content identity (``sha256:``, as ``file_identity``), the size and the 
 ``ETag``/``Last-Modified``. Asking again sends those back (HTTP conditional GET, RFC 9110
 section 13): ``304 Not Modified`` reuses the copy, anything else downloads it again.
 
-The OPeNDAP protocol itself (DAP2/DAP4 requests through netCDF-C) is not used: an OPeNDAP
-endpoint's own URL answers with an HTML form or a DAP error, which is refused with a line
-that says to give its netCDF download instead.
+An OPeNDAP dataset URL is not a file: ``planner.forecast.opendap`` tells it by its ``URL.dds``
+and reads the part a plan needs over DAP instead (``fetch_source`` chooses).
 """
 
 from __future__ import annotations
@@ -51,6 +50,15 @@ class Fetched:
     def describe(self) -> str:
         how = "downloaded" if self.downloaded else "not modified, cached copy"
         return f"{self.url} -> {self.path} ({how}, {self.size_bytes:,} bytes, {self.identity})"
+
+
+def file_sha256(path: Path) -> str:
+    """``sha256:`` + the first 16 hex characters of the SHA-256 of the file's bytes (``OSError`` as it comes)."""
+    digest = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(_BLOCK), b""):
+            digest.update(block)
+    return "sha256:" + digest.hexdigest()[:16]
 
 
 def is_url(source: object) -> bool:
@@ -122,7 +130,7 @@ def _download(response: http.client.HTTPResponse, url: str, path: Path) -> tuple
                 shown = first[:40].decode("latin-1").encode("unicode_escape").decode("ascii")
                 raise ForecastError(
                     f"{url}: the server sent {kind} starting {shown!r}, not a netCDF file; expected a netCDF-3 or "
-                    "netCDF-4 file (for an OPeNDAP endpoint, give its netCDF download URL, e.g. THREDDS fileServer)"
+                    "netCDF-4 file, or an OPeNDAP (DAP 2.0) dataset URL that answers URL.dds"
                 )
             block = first
             while block:
