@@ -527,12 +527,21 @@ def mission_forecast(mission: Mission, *, cache_dir: Path | None = None) -> Path
     after; never beside the mission or the table.
     """
     src = mission.forecast
+    if src.url is not None:  # downloaded into the cache; an OPeNDAP dataset, the part the mission's region needs
+        from planner.forecast.opendap import fetch_source
+
+        try:
+            return fetch_source(src.url, cache_dir, bbox=mission.region.bbox).path
+        except ForecastError as exc:
+            raise ForecastError(f"{src.where}: {exc}") from None
     if src.file is not None:
+        if not src.file.exists():  # said here, where the mission's line is known
+            raise ForecastError(f"{src.where}: {src.file}: forecast file not found; check the path")
         return src.file
     if src.directory is not None:
         files = sorted(src.directory.glob("*.nc"), key=lambda p: (p.stat().st_mtime, p.name))
         if not files:
-            raise PlannerError(f"{mission.path}: forecast.directory {src.directory} holds no .nc files")
+            raise ForecastError(f"{src.where}: {src.directory} holds no .nc files")
         return files[-1]
     from planner import __version__
     from planner.forecast.cache import forecasts_dir

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,9 +58,11 @@ _VP = VehicleParams()
 
 @dataclass(frozen=True, kw_only=True)
 class ForecastSource:
-    """Exactly one of ``file``, ``directory`` (watched for new files) or ``synthetic_seed``."""
+    """Exactly one of ``file`` (``url`` when it is given as an http(s) URL), ``directory`` (watched for new files)
+    or ``synthetic_seed``."""
 
     file: Path | None = None
+    url: str | None = None  # kept as written: joined to the mission's folder it would lose a slash of "http://"
     directory: Path | None = None
     synthetic_seed: int | None = None
     synthetic_hours: int = 72
@@ -67,6 +70,8 @@ class ForecastSource:
     time_iso: str | None = None
     variables: tuple[str, str] | None = None
     grid_file: Path | None = None
+    # "missions/x.yaml:7 forecast.file", for errors found when the source is opened; not part of equality
+    where: str = field(default="", compare=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -171,6 +176,11 @@ class Mission:
     replanning: Replanning
     safety: Safety
     signing: Signing | None = None  # None: uploads and commands are not signed
+
+
+def is_url(text: str) -> bool:
+    """An ``http://`` or ``https://`` text, as ``planner.forecast.remote.is_url`` (the contract loads no forecast code)."""
+    return re.match(r"^https?://", text.strip(), re.IGNORECASE) is not None
 
 
 MAX_MISSION_BYTES = 1 << 20  # a mission is a few kB; 1,000 goals are about 80 kB
@@ -342,8 +352,10 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         isinstance(variables, list) and len(variables) == 2 and all(isinstance(x, str) for x in variables)
     ):
         raise doc.error("forecast.variables", f"expected two variable names [U, V]; got {variables!r}")
+    file_text = fc.text("file") if fc.has("file") else None
     forecast = ForecastSource(
-        file=(base / fc.text("file")) if fc.has("file") else None,
+        file=base / file_text if file_text is not None and not is_url(file_text) else None,
+        url=file_text.strip() if file_text is not None and is_url(file_text) else None,
         directory=(base / fc.text("directory")) if fc.has("directory") else None,
         synthetic_seed=seed,
         synthetic_hours=hours,
@@ -351,6 +363,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         time_iso=str(fc.raw("time")) if fc.has("time") else None,
         variables=tuple(variables) if variables else None,
         grid_file=(base / fc.text("grid_file")) if fc.has("grid_file") else None,
+        where=f"{doc.path}:{doc.lines[f'forecast.{sources[0]}']} forecast.{sources[0]}",
     )
 
     rg = top.section("region", {"bbox", "nx", "ny", "depths_m"})

@@ -37,6 +37,7 @@ class BatchItem:
     goal_index: int
     request: PlanRequest
     out: Path
+    where: str = ""  # the goal's mission line, "missions/x.yaml:31 goals[1]", for its errors
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -111,10 +112,10 @@ def collect(files: list[Path], out_dir: Path, forecast: Path | None) -> list[Bat
     for vehicle, path in vehicles:
         mission = load_mission(path)
         fc = forecast or mission_forecast(mission)
-        for g in range(len(mission.goals)):
+        for g, goal in enumerate(mission.goals):
             request = PlanRequest.for_mission(mission, fc, goal_index=g)
             items.append(BatchItem(vehicle=vehicle, goal_index=g, request=request,
-                                   out=out_dir / vehicle / f"goal-{g}.lrpt"))
+                                   out=out_dir / vehicle / f"goal-{g}.lrpt", where=goal.where))
     return items
 
 
@@ -127,7 +128,8 @@ def plan_item(item: BatchItem) -> BatchResult:
         result = make_plan(item.request, samples=_worker_samples())
     except LrauvError as exc:
         return BatchResult(vehicle=item.vehicle, goal_index=item.goal_index, table=None, reachable=0,
-                           water_states=0, plan_s=time.perf_counter() - t, error=str(exc))
+                           water_states=0, plan_s=time.perf_counter() - t,
+                           error=f"{item.where}: {exc}" if item.where else str(exc))
     return BatchResult(
         vehicle=item.vehicle, goal_index=item.goal_index, table=result.table.to_bytes(),
         reachable=int(result.solution.reachable.sum()), water_states=int(result.model.water.sum()) * 8,

@@ -135,17 +135,18 @@ def _plan_goal(mission: Mission, n: int, forecast: Path | None, out: Path, repor
     from planner.pipeline import PlanRequest, mission_forecast, plan_with_scheduler
     from planner.plan_summary import summary_lines, time_line
 
-    goal = mission.goals[n].goal
+    goal = mission.goals[n]
+    if forecast is None:  # a missing source is the mission's forecast line's error, not the goal's
+        request = PlanRequest.for_mission(mission, mission_forecast(mission), goal_index=n)
+    else:  # the given forecast replaces the mission's whole forecast section: its step and variables too
+        request = replace(PlanRequest.for_mission(mission, forecast, goal_index=n),
+                          time_index=None, time_iso=None, variables=None, grid_file=None)
     try:
-        if forecast is None:
-            request = PlanRequest.for_mission(mission, mission_forecast(mission), goal_index=n)
-        else:  # the given forecast replaces the mission's whole forecast section: its step and variables too
-            request = replace(PlanRequest.for_mission(mission, forecast, goal_index=n),
-                              time_index=None, time_iso=None, variables=None, grid_file=None)
         t0 = time.perf_counter()
         result = plan_with_scheduler(request, samples=samples)
     except LrauvError as exc:
-        raise ShoreError(f"{mission.path}: planning goal ({goal.lon_deg:g}, {goal.lat_deg:g}) failed: {exc}") from None
+        g = goal.goal
+        raise ShoreError(f"{goal.where or mission.path}: planning goal ({g.lon_deg:g}, {g.lat_deg:g}) failed: {exc}") from None
     data = result.table.to_bytes()
     write_atomic(out, data)
     for line in summary_lines(result, out=out, size=len(data)):

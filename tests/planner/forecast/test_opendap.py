@@ -92,3 +92,19 @@ def test_a_plain_netcdf_url_is_still_downloaded_whole(server, synthetic_forecast
     fetched = fetch_source(f"{base}/scb.nc", tmp_path / "cache")
     assert fetched.path.read_bytes() == Path(synthetic_forecast).read_bytes()
     assert [path for path, _ in requests] == ["/scb.nc.dds", "/scb.nc"]
+
+
+def test_a_mission_whose_forecast_is_a_dap_url_plans_its_region(served, tmp_path, capsys):
+    from tests.support import REPO
+
+    _server, url = served
+    text = (REPO / "missions" / "demo.yaml").read_text()
+    synthetic = "  synthetic: {seed: 0, hours: 72}\n"
+    assert synthetic in text
+    mission = tmp_path / "dap.yaml"
+    mission.write_text(text.replace(synthetic, f"  file: {url}\n"))
+    cache = tmp_path / "cache"
+    assert main(["plan", str(mission), "--cache-dir", str(cache), "--out", str(tmp_path / "t.lrpt"), "--quiet"]) == 0
+    table = PolicyTable.load(tmp_path / "t.lrpt")
+    assert table.nx == 29 and table.ny == 21  # the mission's region, from the dataset's copy
+    assert len(list((cache / "forecasts").glob("*.dap.nc"))) == 1
