@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.cluster import InProcess, Runner, open_runner
-from planner.contract.errors import ForecastError, GridError, PlannerError
+from planner.contract.errors import CoverageError, ForecastError, GridError, PlannerError
 from planner.forecast import (
     Forecast,
     ForecastTimes,
@@ -171,7 +171,7 @@ def check_coverage(forecast: Forecast, grid: Grid) -> None:
     lon_lo, lon_hi = float(np.nanmin(lon)), float(np.nanmax(lon))
     if (not lon_shifts(b.west_deg, b.east_deg, lon_lo, lon_hi)
             or b.north_deg < np.nanmin(lat) or b.south_deg > np.nanmax(lat)):
-        raise GridError(
+        raise CoverageError(
             f"bbox {b.west_deg:g},{b.south_deg:g},{b.east_deg:g},{b.north_deg:g} lies outside the forecast "
             f"{forecast.source}, which covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, "
             f"lat {np.nanmin(lat):.4f}..{np.nanmax(lat):.4f}"

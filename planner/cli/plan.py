@@ -18,7 +18,7 @@ from typing import Any
 from planner.cli.cluster_options import add_cluster_arguments
 from planner.contract.arguments import Subcommands, floats
 from planner.contract.columns import say
-from planner.contract.errors import GoalError, LrauvError
+from planner.contract.errors import CoverageError, GoalError, LrauvError
 
 COST_NAMES = ("drift", "forward", "rotate", "glide")
 
@@ -114,6 +114,10 @@ def run(args: argparse.Namespace) -> int:
         if mission is None or args.goal is not None:
             raise
         raise GoalError(f"{mission.goals[0].where}: {exc}") from None
+    except CoverageError as exc:  # the mission's region: name its file and line
+        if mission is None or args.bbox is not None or not mission.region.where:
+            raise
+        raise CoverageError(f"{mission.region.where}: {exc}") from None
     start = None if args.start is None else start_state(result, args.start)
     if start is not None:  # the vehicle shows it on its map (executive.map_layers)
         from planner.shore.plots.solutions import nominal_lon_lat

@@ -31,6 +31,10 @@ class ForecastError(PlannerError):
     """A forecast file that cannot be read or does not cover what was asked."""
 
 
+class CoverageError(ForecastError):
+    """A planning region (bbox) that lies outside the forecast."""
+
+
 class GridError(PlannerError):
     """A planning grid that is malformed or does not fit the forecast."""
 

@@ -82,6 +82,8 @@ class Region:
     nx: int | None
     ny: int | None
     depths_m: tuple[float, ...]
+    # "missions/x.yaml:12 region.bbox" where the mission gives one, for a bbox the forecast does not cover
+    where: str = field(default="", compare=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -383,7 +385,9 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         except LrauvError as exc:
             raise doc.error("region.bbox", str(exc).split(": ", 1)[-1]) from None
         nx, ny = rg.integer("nx", minimum=2), rg.integer("ny", minimum=2)
-    region = Region(bbox=bbox, nx=nx, ny=ny, depths_m=tuple(float(d) for d in depths))
+    bbox_line = doc.lines.get("region.bbox") if bbox is not None else None
+    region = Region(bbox=bbox, nx=nx, ny=ny, depths_m=tuple(float(d) for d in depths),
+                    where=f"{doc.path}:{bbox_line} region.bbox" if bbox_line else "")
 
     vh = top.section("vehicle", {"cruise_speed_m_s", "yaw_rate_deg_s", "glide_rate_m_s", "energy"})
     en = vh.section("energy", {"hotel_w", "propulsion_w", "buoyancy_w", "battery_wh"})

@@ -14,7 +14,7 @@ import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
-from planner.contract.errors import ForecastError
+from planner.contract.errors import CoverageError, ForecastError
 from planner.forecast.cf import axis_variable, numbers
 from planner.forecast.layout import Components
 from planner.forecast.model import MAX_ABS_LON_DEG, is_periodic_lon, lon_shifts
@@ -187,7 +187,7 @@ def regular_window(
     tol_y = _snap_bound(lat)
     p_y, q_y = max(float(bbox.south_deg), float(lat[0]) - tol_y), min(float(bbox.north_deg), float(lat[-1]) + tol_y)
     if not brackets or p_y > q_y:
-        raise ForecastError(
+        raise CoverageError(
             f"{label}: bbox {bbox.west_deg:g},{bbox.south_deg:g},{bbox.east_deg:g},{bbox.north_deg:g} lies outside the "
             f"forecast, which covers lon {lon[0]:.4f}..{lon[-1]:.4f}, lat {lat[0]:.4f}..{lat[-1]:.4f}; expected a bbox "
             "that overlaps it"

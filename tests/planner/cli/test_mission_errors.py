@@ -112,3 +112,14 @@ def test_plan_and_upload_name_the_mission_line_of_a_forecast_that_is_not_there(t
         [command, str(path), "--to=udpout:127.0.0.1:9", "--timeout-s=0.2", "--quiet"]
     line = error_line(capsys, args)
     assert f"{path}:{line_of(path, source)} forecast.{key}: " in line, line
+
+
+def test_a_region_outside_the_forecast_names_the_mission_line(synthetic_forecast, tmp_path, capsys):
+    text = (REPO / "missions" / "two-goals.yaml").read_text()
+    bbox = next(line for line in text.splitlines(keepends=True) if line.lstrip().startswith("bbox:"))
+    path = tmp_path / "far.yaml"
+    path.write_text(text.replace(bbox, "  bbox: [10.0, 50.0, 11.0, 51.0]\n"))
+    line = error_line(capsys, ["plan", str(path), f"--forecast={synthetic_forecast}", f"--out={tmp_path / 'o.lrpt'}",
+                               "--quiet"])
+    assert f"{path}:{line_of(path, '  bbox: [10.0, 50.0, 11.0, 51.0]' + chr(10))} region.bbox: " in line, line
+    assert "lies outside the forecast" in line, line
