@@ -67,7 +67,7 @@ class PlanRequest:
     time_index: int | None = None
     time_iso: str | None = None
     variables: tuple[str, str] | None = None
-    grid_file: Path | None = None
+    grid_file: Path | str | None = None  # a path, or an http(s) URL
     ensemble: tuple[Path, ...] = ()  # further forecast files: members of an ensemble (physical model)
     members: tuple[MemberRef, ...] | None = None  # explicit members, instead of every member of the files
     previous_forecast: Path | None = None  # an earlier issue: measures the forecast error (planner.forecast.error)
@@ -226,7 +226,7 @@ class MemberTask:
     settings: PlanSettings
     goal_mask: NDArray[np.bool_]
     variables: tuple[str, str] | None = None
-    grid_file: Path | None = None
+    grid_file: Path | str | None = None  # a path, or an http(s) URL
 
 
 def members_of(request: PlanRequest) -> list[MemberRef]:

@@ -69,7 +69,7 @@ class ForecastSource:
     time_index: int | None = None
     time_iso: str | None = None
     variables: tuple[str, str] | None = None
-    grid_file: Path | None = None
+    grid_file: Path | str | None = None  # an http(s) URL kept as written, as ``url``
     # "missions/x.yaml:7 forecast.file", for errors found when the source is opened; not part of equality
     where: str = field(default="", compare=False)
 
@@ -364,7 +364,8 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         time_index=fc.integer("time_index", minimum=0) if fc.has("time_index") else None,
         time_iso=str(fc.raw("time")) if fc.has("time") else None,
         variables=tuple(variables) if variables else None,
-        grid_file=(base / fc.text("grid_file")) if fc.has("grid_file") else None,
+        grid_file=None if not fc.has("grid_file") else fc.text("grid_file").strip() if is_url(fc.text("grid_file"))
+        else base / fc.text("grid_file"),
         where=f"{doc.path}:{doc.lines[f'forecast.{sources[0]}']} forecast.{sources[0]}",
     )
 

@@ -83,6 +83,8 @@ def test_a_forecast_url_is_kept_as_written(tmp_path):
     source = load_mission(path).forecast
     assert source.url == "HTTPS://example.org/fc/scb.nc" and source.file is None
     assert source.where == f"{path}:{line_of(path, URL_FILE)} forecast.file"
+    grid = two_goals(tmp_path, "grid", forecast=URL_FILE + "  grid_file: http://example.org/fc/grid.nc\n")
+    assert load_mission(grid).forecast.grid_file == "http://example.org/fc/grid.nc"  # a ROMS grid file's URL too
 
 
 def test_a_mission_plans_on_its_forecast_url(server, synthetic_forecast, tmp_path, capsys):  # noqa: F811
