@@ -71,7 +71,7 @@ class ForecastSource:
     variables: tuple[str, str] | None = None
     grid_file: Path | str | None = None  # an http(s) URL kept as written, as ``url``
     # "missions/x.yaml:7 forecast.file", for errors found when the source is opened; not part of equality
-    where: str = field(default="", compare=False)
+    where: str = field(default="", compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -83,7 +83,7 @@ class Region:
     ny: int | None
     depths_m: tuple[float, ...]
     # "missions/x.yaml:12 region.bbox" where the mission gives one, for a bbox the forecast does not cover
-    where: str = field(default="", compare=False)
+    where: str = field(default="", compare=False, repr=False)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -99,12 +99,15 @@ def test_batch_plans_on_dask_equal_one_process(cluster, files, tmp_path):
     assert len({r.table for r in here}) == 4  # four different plans
 
 
-def test_batch_command_with_scheduler_address_writes_every_goal(cluster, files, tmp_path, capsys):
+def test_batch_command_with_scheduler_address_writes_every_goal(cluster, files, tmp_path, capsys, monkeypatch):
     c, _runner = cluster
     fleet = tmp_path / "fleet.yaml"
     fleet.write_text(f"fleet:\n  - {{vehicle: alpha, mission: {files['physical']}}}\n"
                      f"  - {{vehicle: beta, mission: {files['paper']}}}\n")
-    rc = main(["batch", str(fleet), "--out", str(tmp_path / "out"), "--scheduler", c.scheduler_address, "--quiet"])
+    # A relative --out, as a user types it: a path is one word, which wraps to a line of its own but is never cut,
+    # so pytest's long temporary folders (a worker's among them) would make its lines what they measure.
+    monkeypatch.chdir(tmp_path)
+    rc = main(["batch", str(fleet), "--out", "out", "--scheduler", c.scheduler_address, "--quiet"])
     out = capsys.readouterr().out
     assert rc == 0, out
     written = sorted(p.relative_to(tmp_path / "out").as_posix() for p in (tmp_path / "out").rglob("*.lrpt"))

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -121,7 +121,8 @@ def plan_again(table: PolicyTable, forecast: str | os.PathLike[str]) -> PlanResu
         raise ShoreError(f"{forecast}: planning table {table.crc32:08x} again gives {differ:,} of {table.n_states * table.n_slices:,}"
                            " actions that differ from the table; it was not planned on this forecast and step"
                            " with these settings")
-    return result
+    # The same table again: the nominal path it carries was drawn on shore from its start, not planned.
+    return replace(result, table=replace(again, nominal_path=table.nominal_path))
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
