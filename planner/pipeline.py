@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,9 +25,11 @@ from planner.forecast import (
     nearest_time_index,
     open_forecast,
 )
+from planner.forecast.ensemble import ensemble_mean
 from planner.forecast.error import ErrorEstimate, measure_error
 from planner.forecast.resample import resample
 from planner.grid import Grid
+from planner.contract.columns import fit
 from planner.contract.geodesy import BBox
 from planner.compile_note import COMPILING, needs_compile
 from planner.contract.progress import SILENT, Progress
@@ -302,6 +305,13 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     if request.goal.lon_deg > 180.0:  # given on 0..360: the grid is on -180..180 (planning_grid)
         request = replace(request, goal=replace(request.goal, lon_deg=request.goal.lon_deg - 360.0))
     refs = members_of(request) if forecast is None else [MemberRef(path=Path(request.forecast_path))]
+    if len(refs) > 1 and request.settings.time_varying:
+        members = [open_forecast(r.path, variables=request.variables, grid_file=request.grid_file, member=r.member,
+                                 bbox=request.bbox) for r in refs]
+        mean = ensemble_mean(members)
+        _note(progress, f"time-varying plan on the mean of {len(refs)} forecast members")
+        return _plan_horizon(request, mean, choose_time_index(mean, request), timings, t, progress, meter,
+                             members=members)
     if len(refs) > 1:
         return _plan_ensemble(request, refs, runner=runner or InProcess(), progress=progress, meter=meter)
     steps_needed = request.settings.time_varying or (request.settings.error_measured and request.settings.model == "physical")
@@ -371,9 +381,10 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     )
 
 
-def _with_error(request: PlanRequest, forecast: Forecast, grid: Grid, index: int,
-                progress: bool) -> tuple[PlanRequest, ErrorEstimate | None]:
-    """The request with ``current_error_m_s`` measured from the data, when its settings ask for that."""
+def _with_error(request: PlanRequest, forecast: Forecast, grid: Grid, index: int, progress: bool,
+                members: Sequence[Forecast] = ()) -> tuple[PlanRequest, ErrorEstimate | None]:
+    """The request with ``current_error_m_s`` measured from the data, when its settings ask for that
+    (``members``: the ensemble whose mean ``forecast`` is)."""
     settings = request.settings
     if not settings.error_measured:
         return request, None
@@ -382,7 +393,7 @@ def _with_error(request: PlanRequest, forecast: Forecast, grid: Grid, index: int
         previous = open_forecast(request.previous_forecast, variables=request.variables, grid_file=request.grid_file,
                                  bbox=request.bbox)
     error = measure_error(forecast, grid, index, settings.horizon_h, time_varying=settings.time_varying,
-                          previous=previous, default_m_s=settings.physical.current_error_m_s)
+                          previous=previous, members=members, default_m_s=settings.physical.current_error_m_s)
     _note(progress, f"forecast error {error.describe()}")
     physical = replace(settings.physical, current_error_m_s=round(error.current_error_m_s, 4))
     return replace(request, settings=replace(settings, physical=physical)), error
@@ -410,8 +421,9 @@ def slice_steps(forecast: Forecast, index: int, horizon_h: float, slice_h: float
 
 
 def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings: dict[str, float], t: float,
-                  progress: bool, meter: Progress) -> PlanResult:
-    """A time-varying physical plan (``planner.physical.horizon``): a slice per forecast step."""
+                  progress: bool, meter: Progress, *, members: Sequence[Forecast] = ()) -> PlanResult:
+    """A time-varying physical plan (``planner.physical.horizon``): a slice per forecast step
+    (``members``: the ensemble whose mean ``forecast`` is, for the measured error)."""
     if forecast.time_origin is None:
         raise ForecastError(f"{forecast.source}: a time-varying plan needs dated forecast steps (its table is looked up "
                             "by UTC time); the file's time axis has no reference date")
@@ -419,7 +431,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     timings["load_s"] = time.perf_counter() - t
     grid = planning_grid(forecast, request)
     check_coverage(forecast, grid)
-    request, error = _with_error(request, forecast, grid, index, progress)
+    request, error = _with_error(request, forecast, grid, index, progress, members)
     settings = request.settings
     refine = refine_factor(grid, native_spacing_deg(forecast))
     fine = fine_grid(grid, refine)
@@ -470,9 +482,7 @@ def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, w
     """
     refs = members_of(request)
     request = replace(request, members=tuple(refs))
-    if len(refs) > 1 and request.settings.time_varying:
-        raise PlannerError(f"a time-varying plan takes one forecast (its steps are the slices); got {len(refs)} members")
-    if len(refs) == 1:
+    if len(refs) == 1 or request.settings.time_varying:  # a time-varying plan flies the members' mean, here
         return make_plan(request, progress=progress, samples=samples, meter=meter)
     with open_runner(scheduler, workers=workers) as runner:
         _note(progress, f"{len(refs)} forecast members, sampled: {runner.describe()}")
@@ -491,6 +501,12 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
     timings["load_s"] = time.perf_counter() - t
     timings["resample_s"] = 0.0  # in the member tasks
     grid, index = tasks[0].grid, tasks[0].time_index
+    error = None
+    if request.settings.error_measured:  # the members are the spread: measuring it again would count it twice
+        error = ErrorEstimate(current_error_m_s=request.settings.physical.current_error_m_s, source="default",
+                              detail=f"a stationary plan takes its {len(refs)} members as outcomes, so their spread "
+                                     "is in the plan already; each member keeps the setting's own perturbation")
+        _note(progress, f"forecast error {error.describe()}")
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states; "
                     f"{len(refs)} forecast members")
     t = time.perf_counter()
@@ -516,7 +532,7 @@ def _plan_ensemble(request: PlanRequest, refs: list[MemberRef], *, runner: Runne
     )
     u, v = resample(first, grid, time_index=first.step_index(index))  # the first member's, for pictures
     return PlanResult(forecast=first, time_index=index, grid=grid, u_m_s=u, v_m_s=v,
-                      model=model, solution=solution, table=table, timings_s=timings)
+                      model=model, solution=solution, table=table, timings_s=timings, error=error)
 
 
 def mission_forecast(mission: Mission, *, cache_dir: Path | None = None) -> Path:
@@ -563,4 +579,4 @@ def _announce_compile(meter: Progress, kernel: object) -> None:
 
 def _note(progress: bool, text: str) -> None:
     if progress:
-        print(f"  {text}", file=sys.stderr, flush=True)
+        print(fit(f"  {text}"), file=sys.stderr, flush=True)

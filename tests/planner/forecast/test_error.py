@@ -86,3 +86,66 @@ def test_plan_says_what_it_chose_and_warns_when_most_states_are_unreachable(file
     assert any(line.startswith("error      ") and "forecast change" in line for line in lines)
     assert result.model.settings.physical.current_error_m_s == round(result.error.current_error_m_s, 4)
     assert any(line.startswith("warning    fewer than half the water states") for line in lines), lines
+
+
+@pytest.fixture(scope="module")
+def members(tmp_path_factory, files):
+    """Three members of one ensemble run: the tide early, late and weak, on one grid and the same steps."""
+    root = tmp_path_factory.mktemp("ensemble")
+    base = TidalSettings(hours=6, depths_m=(0.0,))
+    return [files[1],
+            write_tidal(root / "m1.nc", with_forecast_error(base, phase_error_h=-0.5, amplitude_error=0.1)),
+            write_tidal(root / "m2.nc", with_forecast_error(base, phase_error_h=0.5, amplitude_error=-0.1))]
+
+
+def test_the_ensemble_mean_is_the_members_mean_with_land_where_any_member_has_land(members, tmp_path):
+    from planner.forecast.ensemble import ensemble_mean
+
+    fs = [open_forecast(p) for p in members]
+    mean = ensemble_mean(fs)
+    assert mean.source.startswith("mean of 3 members of ") and mean.identity.startswith("ensemble-mean:")
+    want = (fs[0].u_east_m_s + fs[1].u_east_m_s + fs[2].u_east_m_s) / 3.0
+    assert np.allclose(mean.u_east_m_s, want, rtol=1e-15, atol=0.0, equal_nan=True)
+    assert np.array_equal(np.isnan(mean.v_north_m_s), np.isnan(fs[0].v_north_m_s) | np.isnan(fs[2].v_north_m_s))
+    short = write_tidal(tmp_path / "short.nc", TidalSettings(hours=3, depths_m=(0.0,)))
+    with pytest.raises(Exception, match=r"short\.nc: ensemble member differs .* in its times"):
+        ensemble_mean([fs[0], open_forecast(short)])
+
+
+def test_an_ensembles_spread_sizes_the_error_of_a_plan_on_its_mean(members):
+    from planner.forecast.ensemble import ensemble_mean
+
+    fs = [open_forecast(p) for p in members]
+    g = grid()
+    est = measure_error(ensemble_mean(fs), g, 0, 3.0, time_varying=True, members=fs, default_m_s=0.03)
+    assert est.source == "ensemble spread" and "3 members" in est.detail and "over 4 step(s)" in est.detail
+    sq, n = 0.0, 0
+    for step in range(4):
+        fields = [resample(f, g, time_index=step) for f in fs]
+        for comp in (0, 1):
+            stack = np.stack([f[comp] for f in fields])
+            water = np.all(np.isfinite(stack), axis=0)
+            sq += float(np.sum(np.var(stack[:, water], axis=0, ddof=1)))
+            n += int(water.sum())
+    assert est.current_error_m_s == pytest.approx(math.sqrt(sq / n) * math.sqrt(1 + 1 / 3), rel=1e-12)
+    assert 0.03 < est.current_error_m_s < 1.0
+    alike = measure_error(fs[0], g, 0, 3.0, time_varying=True, members=[fs[0], fs[0]], default_m_s=0.03)
+    assert alike.source == "ensemble spread" and alike.current_error_m_s == 0.0
+
+
+def test_a_time_varying_plan_given_members_flies_their_mean_with_their_spread_as_error(members, tmp_path):
+    from planner.contract.mission import load_mission
+    from planner.pipeline import PlanRequest, plan_with_scheduler
+    from planner.plan_summary import summary_lines
+
+    mission = load_mission("missions/eval-tidal.yaml")
+    request = PlanRequest.for_mission(mission, members[0])
+    settings = replace(request.settings, error_measured=True, time_varying=True, horizon_h=2.0)
+    request = replace(request, settings=settings, ensemble=tuple(members[1:]), nx=13, ny=7)
+    result = plan_with_scheduler(request, scheduler="in-process")
+    assert result.table.time_varying and result.table.n_slices == 3
+    assert result.table.forecast_source.startswith("mean of 3 members of ")
+    assert result.error is not None and result.error.source == "ensemble spread"
+    assert result.model.settings.physical.current_error_m_s == round(result.error.current_error_m_s, 4)
+    lines = summary_lines(result, out=tmp_path / "t.lrpt", size=0)
+    assert any(line.startswith("error      ") and "ensemble spread" in line for line in lines), lines
