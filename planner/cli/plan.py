@@ -42,7 +42,8 @@ def add_parser(sub: Subcommands) -> None:
     plan.add_argument("mission", nargs="?", type=Path, help="mission YAML file (flags below override it)")
     plan.add_argument("--forecast", nargs="+", metavar="FILE|URL",
                       help="forecast netCDF file or http(s) URL of one (downloaded to the cache); several (or a file "
-                           "with a member dimension) are the members of an ensemble, the outcomes of the physical model")
+                           "with a member dimension) are the members of an ensemble, the outcomes of the physical model "
+                           "(a time-varying plan flies their mean)")
     plan.add_argument("--variables", type=lambda t: t.split(","), help="U,V variable names, when not found by CF standard names")
     plan.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
     plan.add_argument("--bbox", type=lambda t: floats(t, 4, "bbox"), help="WEST,SOUTH,EAST,NORTH in degrees (cell centres on the edges)")
