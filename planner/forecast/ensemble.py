@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from planner.contract.errors import ForecastError
 from planner.forecast.model import Forecast
@@ -37,20 +38,20 @@ def ensemble_mean(members: Sequence[Forecast]) -> Forecast:
 
 
 def _check_alike(first: Forecast, other: Forecast) -> None:
-    """Refuse a member whose grid, depths or times differ from the first member's, naming what differs."""
+    """Refuse a member whose times, grid or depths differ from the first member's, naming what differs
+    (equal axes give equal velocity shapes)."""
     what = None
     if first.time_origin != other.time_origin or not np.array_equal(first.time_s, other.time_s):
         what = (f"times ({first.time_s.size} step(s) from {first.time_origin}; this member "
                 f"{other.time_s.size} from {other.time_origin})")
-    elif first.lon_deg.shape != other.lon_deg.shape or not (
-            np.array_equal(first.lon_deg, other.lon_deg) and np.array_equal(first.lat_deg, other.lat_deg)):
+    elif not (np.array_equal(first.lon_deg, other.lon_deg) and np.array_equal(first.lat_deg, other.lat_deg)):
         what = f"lon/lat grid ({first.lon_deg.shape} against {other.lon_deg.shape})"
-    elif (first.depth_m is None) != (other.depth_m is None) or (
-            first.depth_m is not None and other.depth_m is not None
-            and (first.depth_m.shape != other.depth_m.shape or not np.array_equal(first.depth_m, other.depth_m))):
+    elif not _same_depths(first.depth_m, other.depth_m):
         what = "depths"
-    elif first.u_east_m_s.shape != other.u_east_m_s.shape:
-        what = f"velocity shape ({first.u_east_m_s.shape} against {other.u_east_m_s.shape})"
     if what is not None:
         raise ForecastError(f"{other.source}: ensemble member differs from {first.source} in its {what}; expected "
                             "members of one ensemble run on one grid, with the same steps")
+
+
+def _same_depths(a: NDArray[np.float64] | None, b: NDArray[np.float64] | None) -> bool:
+    return a is None and b is None or a is not None and b is not None and np.array_equal(a, b)

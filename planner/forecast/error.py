@@ -69,10 +69,9 @@ def _spread(members: Sequence[Forecast], grid: Grid, steps: list[int]) -> ErrorE
         fields = [resample(f, grid, time_index=f.step_index(n)) for f in members]
         for comp in (0, 1):
             stack = np.stack([f[comp] for f in fields])
-            water = np.all(np.isfinite(stack), axis=0)
-            dev = stack[:, water] - np.mean(stack[:, water], axis=0)
-            total += float(np.sum(dev**2))
-            count += int(np.count_nonzero(water))
+            wet = stack[:, np.all(np.isfinite(stack), axis=0)]  # (members, water nodes)
+            total += float(np.sum((wet - np.mean(wet, axis=0)) ** 2))
+            count += wet.shape[1]
     if count == 0:
         return None
     sigma = math.sqrt(total / ((m - 1) * count))
