@@ -40,6 +40,7 @@ N_CHANNELS_BEARINGS = 3 + N_HEADINGS
 N_CHANNELS_COURSES = 3 + 3 * N_HEADINGS
 SLOTS = 25  # outcome cells within +-2 cells: slot = (dj + 2) * 5 + (di + 2)
 GOAL_REACH_CELLS = 2  # a sample ends within 1.5 cells of its cell's centre: goal entry changes cells this near
+_CHUNK = 32  # (cell, channel) pairs a parallel task samples with one set of scratch arrays
 _BLOCK_CELLS = 8192  # cells sampled per block: the dense scratch is about 5 MB per 1,000 cells
 
 
@@ -126,6 +127,7 @@ class _Kernel:
 
     uf: NDArray[np.float64]
     vf: NDArray[np.float64]
+    corners: NDArray[np.float64]  # per fine cell: its four nodes' u, then v (one cache line)
     wet: NDArray[np.bool_]
     water: NDArray[np.bool_]
     refine: int
@@ -152,9 +154,9 @@ class _Kernel:
         esum = np.zeros((n, self.n_channels))
         tsum = np.zeros((n, self.n_channels))
         hazard = np.zeros((n, self.n_channels), dtype=np.bool_)
-        _sample_cells(cells, self.uf, self.vf, self.wet, self.water, goal, self.refine, self.lat0, self.dlat,
-                      self.dlon_rad, self.dy_m, self.depth_m, self.course_rad, self.offsets, self.members, self.speed,
-                      self.glide_rate, self.t_max, self.rk4_steps, self.powers, count, emax, esum, tsum, hazard)
+        _sample_cells(cells, self.uf, self.vf, self.corners, self.wet, self.water, goal, self.refine, self.lat0,
+                      self.dlat, self.dlon_rad, self.dy_m, self.depth_m, self.course_rad, self.offsets, self.members,
+                      self.speed, self.glide_rate, self.t_max, self.rk4_steps, self.powers, count, emax, esum, tsum, hazard)
         return hazard, esum, tsum, count, emax
 
 
@@ -179,7 +181,8 @@ def _kernel(u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], gr
         float(power_draw_w(vp, vp.cruise_speed_m_s, False)),  # FORWARD
     ])
     kernel = _Kernel(
-        uf=uf, vf=vf, wet=wet, water=np.isfinite(u) & np.isfinite(v), refine=refine, lat0=float(grid.lat_deg[0]),
+        uf=uf, vf=vf, corners=_corners(uf, vf), wet=wet, water=np.isfinite(u) & np.isfinite(v), refine=refine,
+        lat0=float(grid.lat_deg[0]),
         dlat=grid.dlat_deg, dlon_rad=math.radians(grid.dlon_deg), dy_m=dy_m,
         depth_m=np.asarray(grid.depth_m, dtype=np.float64),
         course_rad=np.ascontiguousarray(np.radians(courses_deg(grid.bearings_deg()))),  # (ny, 8, 3), from north
@@ -188,6 +191,12 @@ def _kernel(u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], gr
         powers=powers, n_channels=N_CHANNELS_COURSES if ps.course_offsets else N_CHANNELS_BEARINGS,
     )
     return kernel, u, v
+
+
+def _corners(uf: NDArray[np.float64], vf: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per fine cell (layer, row, column, flattened): u at its (0, 0), (0, 1), (1, 0), (1, 1) nodes, then v."""
+    parts = [f[:, dy:f.shape[1] - 1 + dy, dx:f.shape[2] - 1 + dx] for f in (uf, vf) for dy in (0, 1) for dx in (0, 1)]
+    return np.ascontiguousarray(np.stack(parts, axis=-1).reshape(-1, 8))
 
 
 def sample_transitions(
@@ -342,55 +351,49 @@ def _interp_slow(f: _F64, l: int, X: float, Y: float) -> float:  # pragma: no co
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _current(uf: _F64, vf: _F64, wet: _Mask, l: int, X: float, Y: float) -> tuple[float, float]:  # pragma: no cover
+def _current(  # pragma: no cover
+    uf: _F64, vf: _F64, corners: _F64, wet: _Mask, l: int, X: float, Y: float,
+) -> tuple[float, float]:
     """(u, v) of layer ``l`` at fine-grid index point (X, Y): inside a fine cell of four water nodes,
     both components with one set of weights (the same sums, in the same order, as ``_interp_slow``);
     elsewhere the clamped, land-checking path."""
-    if X >= 0.0 and Y >= 0.0:
-        x0 = int(X)
-        y0 = int(Y)
-        if x0 < wet.shape[2] and y0 < wet.shape[1] and wet[l, y0, x0]:
-            fx = X - x0
-            fy = Y - y0
-            w00 = (1.0 - fx) * (1.0 - fy)
-            w01 = fx * (1.0 - fy)
-            w10 = (1.0 - fx) * fy
-            w11 = fx * fy
-            cu = w00 * uf[l, y0, x0] + w01 * uf[l, y0, x0 + 1] + w10 * uf[l, y0 + 1, x0] + w11 * uf[l, y0 + 1, x0 + 1]
-            cv = w00 * vf[l, y0, x0] + w01 * vf[l, y0, x0 + 1] + w10 * vf[l, y0 + 1, x0] + w11 * vf[l, y0 + 1, x0 + 1]
-            return cu, cv
+    if X >= 0.0 and Y >= 0.0 and X < wet.shape[2] and Y < wet.shape[1] and wet[l, int(Y), int(X)]:
+        return _wet_current(corners, wet, l, X, Y)
     return _interp_slow(uf, l, X, Y), _interp_slow(vf, l, X, Y)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _velocity(  # pragma: no cover
-    uf: _F64, vf: _F64, wet: _Mask, refine: int, la: int, lb: int, wb: float, x: float, y: float,
-    j: int, cos_j: float, sin_j: float, dlat_rad: float, dlon_rad: float, dy_m: float, we: float, wn: float,
-) -> tuple[float, float]:
-    """(dx/dt, dy/dt) in planning cells per second at planning-index point (x, y); NaN on land.
+def _wet_current(corners: _F64, wet: _Mask, l: int, X: float, Y: float) -> tuple[float, float]:  # pragma: no cover
+    """(u, v) of layer ``l`` at (X, Y) >= 0 inside a fine cell of four water nodes: both components with
+    one set of weights (the same sums, in the same order, as ``_interp_slow``)."""
+    x0 = int(X)
+    y0 = int(Y)
+    fx = X - x0
+    fy = Y - y0
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = fx * (1.0 - fy)
+    w10 = (1.0 - fx) * fy
+    w11 = fx * fy
+    k = (l * wet.shape[1] + y0) * wet.shape[2] + x0
+    cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
+    cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
+    return cu, cv
 
-    Over ground = through water (``we``, ``wn``, m/s, members' offsets included) + the current of
-    layer ``la`` blended with ``lb`` by weight ``wb`` (glides). A stage after one on land is NaN too.
-    ``cos_j``, ``sin_j``: of row ``j``'s latitude, which the point is within a few rows of."""
-    if not (math.isfinite(x) and math.isfinite(y)):
-        return math.nan, math.nan
-    X = x * refine
-    Y = y * refine
-    cu, cv = _current(uf, vf, wet, la, X, Y)
-    if wb > 0.0:
-        bu, bv = _current(uf, vf, wet, lb, X, Y)
-        cu = (1.0 - wb) * cu + wb * bu
-        cv = (1.0 - wb) * cv + wb * bv
-    dx_m = EARTH_RADIUS_M * _cos_near(cos_j, sin_j, (y - j) * dlat_rad) * dlon_rad  # spec section 1: at the point's latitude
-    return (cu + we) / dx_m, (cv + wn) / dy_m
+
+# Below it, cos d to d^4 and sin d to d^3 leave under 1e-17 (d^6 / 720 and d^5 / 120): three rows of
+# the demo's 0.01-degree grid are 5e-4 rad, so the short series is the one that runs.
+_SHORT_SERIES_RAD = 1e-3
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _cos_near(cos_a: float, sin_a: float, d: float) -> float:  # pragma: no cover
     """cos(a + d) from cos a and sin a, for |d| up to a few planning rows (0.05 rad on 1-degree rows):
     the series of cos d and sin d to d^8 and d^9 leave less than 1e-19, below double rounding, and
-    cost a few multiplications where a libm cos per current evaluation was a third of the sampling."""
+    cost a few multiplications where a libm cos per current evaluation was a third of the sampling;
+    below ``_SHORT_SERIES_RAD`` (as ``_stage`` computes it) the short series does."""
     d2 = d * d
+    if abs(d) < _SHORT_SERIES_RAD:
+        return cos_a * (1.0 - d2 * (0.5 - d2 * (1.0 / 24.0))) - sin_a * (d * (1.0 - d2 * (1.0 / 6.0)))
     cos_d = 1.0 - d2 * (1.0 / 2.0) * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0) * (1.0 - d2 * (1.0 / 56.0))))
     sin_d = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0) * (1.0 - d2 * (1.0 / 72.0)))))
     return cos_a * cos_d - sin_a * sin_d
@@ -400,6 +403,76 @@ def _cos_near(cos_a: float, sin_a: float, d: float) -> float:  # pragma: no cove
 def _nearest(x: float) -> int:  # pragma: no cover
     """Nearest index, halves going to the lower one (as ``Grid.nearest_cell``)."""
     return int(math.ceil(x - 0.5))
+
+
+# Rows of the kernel's per-sample scratch: the step, position, time, through-water velocity, glide
+# weight, a stage's point, each stage's (dx/dt, dy/dt), and a stage's current and metric.
+_H, _X, _Y, _T, _WE, _WN, _W, _PX, _PY = range(9)
+_K1, _K2, _K3, _K4 = 9, 11, 13, 15
+_CU, _CV, _DXM = 17, 18, 19
+_ROWS = 20
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _stage(  # pragma: no cover
+    work: _F64, na: int, rx: int, ry: int, rk: int, uf: _F64, vf: _F64, corners: _F64, wet: _Mask, refine: int,
+    la: int, lb: int, j: int, cos_j: float, sin_j: float, dlat_rad: float, dlon_rad: float, dy_m: float,
+) -> None:
+    """(dx/dt, dy/dt) in planning cells per second of the ``na`` running samples at the planning-index
+    points in rows ``rx``, ``ry``, into rows ``rk`` and ``rk + 1``; NaN on land.
+
+    Over ground = through water (rows ``_WE``, ``_WN``, m/s, members' offsets included) + the current
+    of layer ``la`` blended with ``lb`` by the weight in row ``_W`` (glides); a stage after one on
+    land is NaN too. In three loops: the metric at each point's latitude (spec section 1; straight,
+    so LLVM vectorises it), the current (a read of each point's fine cell), the velocity (straight).
+    ``cos_j``, ``sin_j``: of row ``j``'s latitude, which the points are within a few rows of."""
+    far = 0
+    for n in range(na):
+        d = (work[ry, n] - j) * dlat_rad
+        d2 = d * d
+        work[_DXM, n] = EARTH_RADIUS_M * (cos_j * (1.0 - d2 * (0.5 - d2 * (1.0 / 24.0)))
+                                          - sin_j * (d * (1.0 - d2 * (1.0 / 6.0)))) * dlon_rad
+        far += abs(d) >= _SHORT_SERIES_RAD
+    if far:
+        for n in range(na):
+            d = (work[ry, n] - j) * dlat_rad
+            if abs(d) >= _SHORT_SERIES_RAD:
+                work[_DXM, n] = EARTH_RADIUS_M * _cos_near(cos_j, sin_j, d) * dlon_rad
+    nxw, nyw = float(wet.shape[2]), float(wet.shape[1])
+    for n in range(na):
+        X = work[rx, n] * refine
+        Y = work[ry, n] * refine
+        if X >= 0.0 and Y >= 0.0 and X < nxw and Y < nyw and wet[la, int(Y), int(X)]:  # NaN fails every test
+            cu, cv = _wet_current(corners, wet, la, X, Y)
+        elif math.isfinite(X) and math.isfinite(Y):
+            cu, cv = _interp_slow(uf, la, X, Y), _interp_slow(vf, la, X, Y)
+        else:
+            work[_CU, n] = math.nan
+            work[_CV, n] = math.nan
+            continue
+        wb = work[_W, n]
+        if wb > 0.0:
+            bu, bv = _current(uf, vf, corners, wet, lb, X, Y)
+            cu = (1.0 - wb) * cu + wb * bu
+            cv = (1.0 - wb) * cv + wb * bv
+        work[_CU, n] = cu
+        work[_CV, n] = cv
+    for n in range(na):
+        work[rk, n] = (work[_CU, n] + work[_WE, n]) / work[_DXM, n]
+        work[rk + 1, n] = (work[_CV, n] + work[_WN, n]) / dy_m
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _next_point(work: _F64, na: int, rk: int, frac: float, glide_s: float) -> None:  # pragma: no cover
+    """The next RK4 stage's points (rows ``_PX``, ``_PY``): ``frac`` of the step along the slope in
+    rows ``rk``, ``rk + 1``; with a glide (``glide_s`` > 0), the layers' weight at that time too."""
+    for n in range(na):
+        hh = work[_H, n]
+        work[_PX, n] = work[_X, n] + frac * hh * work[rk, n]
+        work[_PY, n] = work[_Y, n] + frac * hh * work[rk + 1, n]
+    if glide_s > 0.0:
+        for n in range(na):
+            work[_W, n] = (work[_T, n] + frac * work[_H, n]) / glide_s
 
 
 # A sample's state between RK4 steps.
@@ -455,9 +528,9 @@ def _finish(  # pragma: no cover
 # 1e-13 Wh), but never the flags that assume no NaN or infinity: NaN is how land shows.
 @numba.njit(cache=True, parallel=True, fastmath={"contract", "arcp", "nsz", "afn"})
 def _sample_cells(  # pragma: no cover
-    cells: _I64, uf: _F64, vf: _F64, wet: _Mask, water: _Mask, goal: _Mask, refine: int, lat0: float, dlat: float,
-    dlon_rad: float, dy_m: float, depth_m: _F64, course_rad: _F64, offsets: _F64, members: _F64, speed: float,
-    glide_rate: float, t_max: float, rk4_steps: int, powers: _F64,
+    cells: _I64, uf: _F64, vf: _F64, corners: _F64, wet: _Mask, water: _Mask, goal: _Mask, refine: int, lat0: float,
+    dlat: float, dlon_rad: float, dy_m: float, depth_m: _F64, course_rad: _F64, offsets: _F64, members: _F64,
+    speed: float, glide_rate: float, t_max: float, rk4_steps: int, powers: _F64,
     count: NDArray[np.int32], emax: _F64, esum: _F64, tsum: _F64, hazard: _Mask,
 ) -> None:
     """Sample every channel of ``cells`` (water cells); row ``r`` of the outputs is ``cells[r]``."""
@@ -465,131 +538,134 @@ def _sample_cells(  # pragma: no cover
     n_off = offsets.shape[0]
     n_mem = members.shape[0]
     n_ch = count.shape[1]
-    # Parallel over (cell, channel): with few cells per block, every core still has work.
-    for rc in numba.prange(cells.size * n_ch):
-        r = rc // n_ch
-        ch = rc % n_ch
-        c = cells[r]
-        l = c // (ny * nx)
-        j = (c // nx) % ny
-        i = c % nx
-        lat = lat0 + j * dlat
-        dlat_rad = math.radians(dlat)
-        cos_j = math.cos(math.radians(lat))
-        sin_j = math.sin(math.radians(lat))
-        dx_m = EARTH_RADIUS_M * cos_j * dlon_rad
-        cell_m = min(dx_m, dy_m)
-        cu, cv = _current(uf, vf, wet, l, i * refine, j * refine)
-        cur = math.hypot(cu, cv)
-        lb = l
-        glide_s = 0.0
-        we = 0.0
-        wn = 0.0
-        if ch == 1 or ch == 2:
-            lb = l - 1 if ch == 1 else l + 1
-            if lb < 0 or lb >= L or not water[lb, j, i]:
-                hazard[r, ch] = True
-                continue
-            glide_s = abs(depth_m[lb] - depth_m[l]) / glide_rate
-            power = powers[1]
-            h = glide_s / rk4_steps
-        else:
-            power = powers[0]
-            v_water = 0.0
-            if ch >= 3:
-                b = course_rad[j, (ch - 3) % 8, (ch - 3) // 8]
-                we = speed * math.sin(b)
-                wn = speed * math.cos(b)
-                power = powers[2]
-                v_water = speed
-            h = min(t_max, cell_m / max(v_water + cur, 1e-3)) / rk4_steps
-        # All samples of the channel advance together, one RK4 stage of every running sample at a
-        # time: the samples are independent, so the core overlaps them instead of waiting on one
-        # sample's chain of stages (each needs the one before).
-        n_q = n_off * n_mem
+    n_q = n_off * n_mem
+    n_rc = cells.size * n_ch
+    n_chunks = (n_rc + _CHUNK - 1) // _CHUNK
+    # Parallel over chunks of (cell, channel): with few cells per block, every core still has work,
+    # and each chunk allocates its scratch once.
+    for chunk in numba.prange(n_chunks):
         xs = np.empty(n_q)
         ys = np.empty(n_q)
-        ts = np.zeros(n_q)
+        ts = np.empty(n_q)
         state = np.empty(n_q, dtype=np.int8)
         act = np.empty(n_q, dtype=np.int64)
-        work = np.empty((9, n_q))  # per running sample: the step, then each stage's (dx/dt, dy/dt)
-        gliding = glide_s > 0.0
-        end = glide_s if gliding else t_max
-        first = _RUNNING if 0.0 < end - 1e-9 else _DONE
+        work = np.empty((_ROWS, n_q))  # per running sample, a row each (the _H ... names)
         start = np.empty((4, n_q))  # per sample: start x, y, through-water east, north (no divisions in the loops)
-        for q in range(n_q):
-            start[0, q] = i + offsets[q // n_mem, 0]
-            start[1, q] = j + offsets[q // n_mem, 1]
-            start[2, q] = we + members[q % n_mem, 0]
-            start[3, q] = wn + members[q % n_mem, 1]
-            xs[q] = start[0, q]
-            ys[q] = start[1, q]
-            state[q] = first
-        running = n_q if first == _RUNNING else 0
-        while running > 0 and not hazard[r, ch]:
-            na = 0
+        for rc in range(chunk * _CHUNK, min(n_rc, (chunk + 1) * _CHUNK)):
+            r = rc // n_ch
+            ch = rc % n_ch
+            c = cells[r]
+            l = c // (ny * nx)
+            j = (c // nx) % ny
+            i = c % nx
+            lat = lat0 + j * dlat
+            dlat_rad = math.radians(dlat)
+            cos_j = math.cos(math.radians(lat))
+            sin_j = math.sin(math.radians(lat))
+            dx_m = EARTH_RADIUS_M * cos_j * dlon_rad
+            cell_m = min(dx_m, dy_m)
+            cu, cv = _current(uf, vf, corners, wet, l, i * refine, j * refine)
+            cur = math.hypot(cu, cv)
+            lb = l
+            glide_s = 0.0
+            we = 0.0
+            wn = 0.0
+            if ch == 1 or ch == 2:
+                lb = l - 1 if ch == 1 else l + 1
+                if lb < 0 or lb >= L or not water[lb, j, i]:
+                    hazard[r, ch] = True
+                    continue
+                glide_s = abs(depth_m[lb] - depth_m[l]) / glide_rate
+                power = powers[1]
+                h = glide_s / rk4_steps
+            else:
+                power = powers[0]
+                v_water = 0.0
+                if ch >= 3:
+                    b = course_rad[j, (ch - 3) % 8, (ch - 3) // 8]
+                    we = speed * math.sin(b)
+                    wn = speed * math.cos(b)
+                    power = powers[2]
+                    v_water = speed
+                h = min(t_max, cell_m / max(v_water + cur, 1e-3)) / rk4_steps
+            # All samples of the channel advance together, one RK4 stage of every running sample at a
+            # time: the samples are independent, so the core overlaps them instead of waiting on one
+            # sample's chain of stages (each needs the one before).
+            gliding = glide_s > 0.0
+            end = glide_s if gliding else t_max
+            first = _RUNNING if 0.0 < end - 1e-9 else _DONE
             for q in range(n_q):
-                if state[q] == _RUNNING:
-                    act[na] = q
-                    na += 1
-            for n in range(na):
-                q = act[n]
-                hh = min(h, end - ts[q])
-                work[0, n] = hh
-                w1 = ts[q] / glide_s if gliding else 0.0
-                work[1, n], work[2, n] = _velocity(uf, vf, wet, refine, l, lb, w1, xs[q], ys[q], j, cos_j, sin_j,
-                                                   dlat_rad, dlon_rad, dy_m, start[2, q], start[3, q])
-            for n in range(na):
-                q = act[n]
-                hh = work[0, n]
-                w2 = (ts[q] + 0.5 * hh) / glide_s if gliding else 0.0
-                work[3, n], work[4, n] = _velocity(uf, vf, wet, refine, l, lb, w2, xs[q] + 0.5 * hh * work[1, n],
-                                                   ys[q] + 0.5 * hh * work[2, n], j, cos_j, sin_j, dlat_rad, dlon_rad,
-                                                   dy_m, start[2, q], start[3, q])
-            for n in range(na):
-                q = act[n]
-                hh = work[0, n]
-                w2 = (ts[q] + 0.5 * hh) / glide_s if gliding else 0.0
-                work[5, n], work[6, n] = _velocity(uf, vf, wet, refine, l, lb, w2, xs[q] + 0.5 * hh * work[3, n],
-                                                   ys[q] + 0.5 * hh * work[4, n], j, cos_j, sin_j, dlat_rad, dlon_rad,
-                                                   dy_m, start[2, q], start[3, q])
-            for n in range(na):
-                q = act[n]
-                hh = work[0, n]
-                w3 = (ts[q] + hh) / glide_s if gliding else 0.0
-                work[7, n], work[8, n] = _velocity(uf, vf, wet, refine, l, lb, w3, xs[q] + hh * work[5, n],
-                                                   ys[q] + hh * work[6, n], j, cos_j, sin_j, dlat_rad, dlon_rad,
-                                                   dy_m, start[2, q], start[3, q])
-            for n in range(na):
-                q = act[n]
-                hh = work[0, n]
-                xn = xs[q] + hh / 6.0 * (work[1, n] + 2.0 * work[3, n] + 2.0 * work[5, n] + work[7, n])
-                yn = ys[q] + hh / 6.0 * (work[2, n] + 2.0 * work[4, n] + 2.0 * work[6, n] + work[8, n])
-                st, xs[q], ys[q], ts[q] = _finish(goal, l, gliding, start[0, q], start[1, q], xs[q],
-                                                  ys[q], ts[q], hh, xn, yn, end, nx, ny)
-                state[q] = st
-                if st == _FAILED:
-                    hazard[r, ch] = True  # one stranded sample makes the action unavailable
+                ts[q] = 0.0
+                start[0, q] = i + offsets[q // n_mem, 0]
+                start[1, q] = j + offsets[q // n_mem, 1]
+                start[2, q] = we + members[q % n_mem, 0]
+                start[3, q] = wn + members[q % n_mem, 1]
+                xs[q] = start[0, q]
+                ys[q] = start[1, q]
+                state[q] = first
+            running = n_q if first == _RUNNING else 0
+            while running > 0 and not hazard[r, ch]:
+                na = 0
+                for q in range(n_q):
+                    if state[q] == _RUNNING:
+                        act[na] = q
+                        na += 1
+                # The running samples gathered into rows of ``work`` so each stage's arithmetic is straight
+                # loops over contiguous rows (vectorised); only the current's corners are read one by one.
+                for n in range(na):
+                    q = act[n]
+                    hh = min(h, end - ts[q])
+                    work[_H, n] = hh
+                    work[_X, n] = xs[q]
+                    work[_Y, n] = ys[q]
+                    work[_T, n] = ts[q]
+                    work[_WE, n] = start[2, q]
+                    work[_WN, n] = start[3, q]
+                    work[_W, n] = ts[q] / glide_s if gliding else 0.0
+                _stage(work, na, _X, _Y, _K1, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
+                       dlon_rad, dy_m)
+                _next_point(work, na, _K1, 0.5, glide_s)
+                _stage(work, na, _PX, _PY, _K2, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
+                       dlon_rad, dy_m)
+                _next_point(work, na, _K2, 0.5, glide_s)
+                _stage(work, na, _PX, _PY, _K3, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
+                       dlon_rad, dy_m)
+                _next_point(work, na, _K3, 1.0, glide_s)
+                _stage(work, na, _PX, _PY, _K4, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
+                       dlon_rad, dy_m)
+                for n in range(na):
+                    hh = work[_H, n]
+                    work[_PX, n] = work[_X, n] + hh / 6.0 * (work[_K1, n] + 2.0 * work[_K2, n] + 2.0 * work[_K3, n]
+                                                             + work[_K4, n])
+                    work[_PY, n] = work[_Y, n] + hh / 6.0 * (work[_K1 + 1, n] + 2.0 * work[_K2 + 1, n]
+                                                             + 2.0 * work[_K3 + 1, n] + work[_K4 + 1, n])
+                for n in range(na):
+                    q = act[n]
+                    st, xs[q], ys[q], ts[q] = _finish(goal, l, gliding, start[0, q], start[1, q], xs[q], ys[q], ts[q],
+                                                      work[_H, n], work[_PX, n], work[_PY, n], end, nx, ny)
+                    state[q] = st
+                    if st == _FAILED:
+                        hazard[r, ch] = True  # one stranded sample makes the action unavailable
+                        break
+                    if st == _DONE:
+                        running -= 1
+            if hazard[r, ch]:
+                continue
+            for q in range(n_q):
+                ii = _nearest(xs[q])
+                jj = _nearest(ys[q])
+                di = ii - i
+                dj = jj - j
+                if ii < 0 or ii >= nx or jj < 0 or jj >= ny or abs(di) > 2 or abs(dj) > 2 or not water[lb, jj, ii]:
+                    hazard[r, ch] = True
                     break
-                if st == _DONE:
-                    running -= 1
-        if hazard[r, ch]:
-            continue
-        for q in range(n_q):
-            ii = _nearest(xs[q])
-            jj = _nearest(ys[q])
-            di = ii - i
-            dj = jj - j
-            if ii < 0 or ii >= nx or jj < 0 or jj >= ny or abs(di) > 2 or abs(dj) > 2 or not water[lb, jj, ii]:
-                hazard[r, ch] = True
-                break
-            e = power * ts[q] / 3600.0
-            slot = (dj + 2) * 5 + (di + 2)
-            count[r, ch, slot] += 1
-            if e > emax[r, ch, slot]:
-                emax[r, ch, slot] = e
-            esum[r, ch] += e
-            tsum[r, ch] += ts[q]
+                e = power * ts[q] / 3600.0
+                slot = (dj + 2) * 5 + (di + 2)
+                count[r, ch, slot] += 1
+                if e > emax[r, ch, slot]:
+                    emax[r, ch, slot] = e
+                esum[r, ch] += e
+                tsum[r, ch] += ts[q]
 
 
 @numba.njit(cache=True)
