@@ -1,12 +1,10 @@
-"""Reading part of a file (docs/forecasts-large.md): size limits checked from the header, dask-backed selections.
+"""Reading part of a file (docs/forecasts-large.md): size limits checked from the header, lazy selections.
 
-The velocities stay dask arrays (xarray chunks) until the time step, the member and the lon/lat
-window are selected, so only that part is read.
+The velocities stay xarray's lazily indexed backend arrays until the time step, the member and the
+lon/lat window are selected, so only that part is read.
 """
 
 from __future__ import annotations
-
-import importlib.util
 
 import numpy as np
 import xarray as xr
@@ -40,25 +38,21 @@ def check_axes(var: xr.DataArray, name: str, label: str) -> None:
             )
 
 
-def _have_dask() -> bool:
-    return importlib.util.find_spec("dask") is not None
-
-
 def lazy_variable(var: xr.DataArray) -> xr.DataArray:
-    """The variable as a dask array in "auto" chunks (nothing read yet), or as it is when dask is missing.
+    """The variable as opened: xarray's lazy indexing, nothing read yet.
 
-    Selecting from it and computing reads only the selected part (dask fuses the slices into the
-    netCDF read; xarray's own lazy indexing does the same without dask).
+    Selecting from it (``isel`` with slices and integers) composes the indexers and reads nothing;
+    loading the selection reads only that hyperslab from the netCDF file. dask's chunks would do the
+    same, and importing dask and distributed for it cost a plan half a second.
     """
-    if not _have_dask():
-        return var
-    return var.chunk("auto")
+    return var
 
 
 def computed(var: xr.DataArray) -> xr.DataArray:
-    """Values of a (possibly dask-backed) selection, computed in this thread (netCDF reads are not thread-safe)."""
+    """Values of a selection, read in this thread (netCDF reads are not thread-safe); a dask-backed
+    one (a caller's own chunks) is computed with dask's synchronous scheduler."""
     if var.chunks is None:
-        return var
+        return var.load()
     return var.compute(scheduler="synchronous")
 
 
