@@ -63,7 +63,8 @@ def run_plan(repo: Path, forecast: Path, nx: int, ny: int, radius: int, out: Pat
     if proc.returncode:
         raise SystemExit(f"{' '.join(cmd)} failed:\n{stdout}")
     rss = int(usage.ru_maxrss) * 1024  # Linux: kilobytes
-    match = _PLAN.search(stdout) if model == "physical" else _PAPER_PLAN.search(stdout)
+    flat = " ".join(stdout.split())  # the summary wraps its lines at 100 columns
+    match = _PLAN.search(flat) if model == "physical" else _PAPER_PLAN.search(flat)
     if match is None:
         raise SystemExit(f"no plan time in the output of {' '.join(cmd)}:\n{stdout}")
     solve = float(match.group(4)) if model == "physical" else float(match.group(1))

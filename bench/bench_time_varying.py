@@ -8,7 +8,7 @@ the peak RSS, and the two tables' sizes with their upload time over a satellite 
 ``--link-bit-s`` (2,400 bit/s by default): as bytes on the wire, and framed as MAVLink FTP writes
 (the executive's upload path: 239 data bytes in each 266-byte MAVLink 2 FILE_TRANSFER_PROTOCOL frame).
 
-    .venv/bin/python bench/bench_time_varying.py [--repeat 3] [--horizon-h 72] [--forecast F.nc] [--json OUT]
+    .venv/bin/python bench/bench_time_varying.py [--repeat 3] [--horizon-h 72] [--forecast F.nc] [--json OUT] [--repo PATH]
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ def main() -> None:
     parser.add_argument("--forecast", type=Path, help="default: the SCB synthetic forecast, issue 0, 72 h")
     parser.add_argument("--link-bit-s", type=float, default=2400.0)
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--repo", type=Path, default=REPO, help="the checkout to run (default: this one)")
     args = parser.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-tv-"))
     forecast = args.forecast
@@ -51,7 +52,7 @@ def main() -> None:
     rows = {}
     for name, extra in (("stationary", ()), ("time-varying", ("--time-varying", "--horizon-h", f"{args.horizon_h:g}"))):
         out = tmp / f"{name}.lrpt"
-        runs = [run_plan(REPO, forecast, nx, ny, 1, out, model="physical", extra=extra) for _ in range(args.repeat + 1)]
+        runs = [run_plan(args.repo, forecast, nx, ny, 1, out, model="physical", extra=extra) for _ in range(args.repeat + 1)]
         best = runs[1:] or runs
         size = out.stat().st_size
         rows[name] = {"plan_s": min(r[0] for r in best), "process_s": min(r[1] for r in best),
