@@ -60,8 +60,8 @@ def open_forecast(
     when the file has a member dimension of more than one member), and ``bbox`` (a
     ``planner.grid.BBox``), on regular lon/lat grids, the lon/lat index ranges that the bbox's
     interpolation uses plus ``WINDOW_MARGIN_NODES`` nodes on each side (clipped at the file's
-    edges). The velocities are dask arrays until that selection is made, so only the selected
-    part is read. ``identity`` stays the whole file's; ``window`` says what was kept; resampling
+    edges). The velocities stay xarray's lazily indexed arrays until that selection is made, so
+    only the selected part is read. ``identity`` stays the whole file's; ``window`` says what was kept; resampling
     the window onto a grid inside the bbox gives the whole file's values bit for bit. Curvilinear,
     projected and ROMS/CROCO files keep their whole horizontal grid (``bbox`` is not used there).
     """

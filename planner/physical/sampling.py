@@ -9,7 +9,8 @@ no sampling. The heading-free channels are therefore sampled once per cell and l
 Outcomes are stored compactly, per (cell, channel), as a list of the outcome cells that any
 sample ended in (a *slot*: the offset within +-2 cells), with the number of samples and their
 largest energy. Cells are sampled in blocks so the dense scratch of one block is all the
-memory the sampling needs beyond its result.
+memory the sampling needs beyond its result and the currents (on the fine grid, and per fine
+cell its four nodes' currents in one row: 64 bytes a fine cell).
 
 Goal entry (a FORWARD or DRIFT sample ends on entering a goal cell) is kept apart: the goal-free
 samples of the whole grid are computed once per forecast, and ``enter_goal`` samples again only
@@ -127,7 +128,7 @@ class _Kernel:
 
     uf: NDArray[np.float64]
     vf: NDArray[np.float64]
-    corners: NDArray[np.float64]  # per fine cell: its four nodes' u, then v (one cache line)
+    corners: NDArray[np.float64]  # per fine cell: its four nodes' u, then v (64 bytes a row)
     wet: NDArray[np.bool_]
     water: NDArray[np.bool_]
     refine: int
@@ -194,7 +195,8 @@ def _kernel(u_fine_m_s: NDArray[np.float64], v_fine_m_s: NDArray[np.float64], gr
 
 
 def _corners(uf: NDArray[np.float64], vf: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Per fine cell (layer, row, column, flattened): u at its (0, 0), (0, 1), (1, 0), (1, 1) nodes, then v."""
+    """Per fine cell (layer, row, column, flattened): u at its (0, 0), (0, 1), (1, 0), (1, 1) nodes, then v:
+    one 64-byte row where the nodes' values lie in two rows of each of two arrays."""
     parts = [f[:, dy:f.shape[1] - 1 + dy, dx:f.shape[2] - 1 + dx] for f in (uf, vf) for dy in (0, 1) for dx in (0, 1)]
     return np.ascontiguousarray(np.stack(parts, axis=-1).reshape(-1, 8))
 
@@ -541,8 +543,8 @@ def _sample_cells(  # pragma: no cover
     n_q = n_off * n_mem
     n_rc = cells.size * n_ch
     n_chunks = (n_rc + _CHUNK - 1) // _CHUNK
-    # Parallel over chunks of (cell, channel): with few cells per block, every core still has work,
-    # and each chunk allocates its scratch once.
+    # Parallel over chunks of _CHUNK (cell, channel) pairs, not over cells: a goal's patch of a few
+    # cells still gives every core work; each chunk allocates its scratch once.
     for chunk in numba.prange(n_chunks):
         xs = np.empty(n_q)
         ys = np.empty(n_q)
