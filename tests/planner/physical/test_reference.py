@@ -14,6 +14,7 @@ import math
 import numpy as np
 import pytest
 
+from planner.contract.geodesy import BBox
 from planner.contract.settings import Goal, PhysicalSettings, PlanSettings
 from planner.grid import Grid
 from planner.paper.solve import goal_cells_on
@@ -54,7 +55,17 @@ def double_gyre() -> tuple[Grid, int, np.ndarray, np.ndarray, Goal]:
     return grid, 2, np.stack([u, 0.6 * u]), np.stack([v, 0.6 * v]), goal_at(grid, 0, 1, 4)
 
 
-CASES = {"swirl with land": swirl_with_land, "strong current": strong_current, "double gyre": double_gyre}
+def coarse_rows() -> tuple[Grid, int, np.ndarray, np.ndarray, Goal]:
+    """Quarter-degree rows at 60 deg N: a sample strays more than 1e-3 rad from its row's latitude, so
+    the kernel's metric takes the long series there (the short one serves the fine grids above)."""
+    grid = small_grid(nx=6, ny=5, depths=(0.0,), bbox=BBox(west_deg=4.0, south_deg=60.0, east_deg=5.5, north_deg=61.0))
+    u, v = swirl(grid, 2, amplitude=0.6)
+    u[0, 5, 6] = v[0, 5, 6] = np.nan  # land beside a fine node of planning cell (i=3, j=2)
+    return grid, 2, u, v, goal_at(grid, 0, 3, 4)
+
+
+CASES = {"swirl with land": swirl_with_land, "strong current": strong_current, "double gyre": double_gyre,
+         "coarse rows": coarse_rows}
 
 
 def plan_settings() -> PlanSettings:
