@@ -1,7 +1,10 @@
 """Reading part of a file (docs/forecasts-large.md): size limits checked from the header, lazy selections.
 
 The velocities stay xarray's lazily indexed backend arrays until the time step, the member and the
-lon/lat window are selected, so only that part is read.
+lon/lat window are selected, so only that part is read: ``isel`` with slices and integers composes
+the indexers and reads nothing, and ``computed`` reads that hyperslab from the netCDF file. dask's
+chunks would read the same part, and importing dask and distributed for them cost a plan half a
+second.
 """
 
 from __future__ import annotations
@@ -36,16 +39,6 @@ def check_axes(var: xr.DataArray, name: str, label: str) -> None:
                 f"at most {MAX_AXIS_POINTS:,} points along any dimension (its coordinates are read whole to find the "
                 "part to read): check a damaged dimension, or subset the file"
             )
-
-
-def lazy_variable(var: xr.DataArray) -> xr.DataArray:
-    """The variable as opened: xarray's lazy indexing, nothing read yet.
-
-    Selecting from it (``isel`` with slices and integers) composes the indexers and reads nothing;
-    loading the selection reads only that hyperslab from the netCDF file. dask's chunks would do the
-    same, and importing dask and distributed for it cost a plan half a second.
-    """
-    return var
 
 
 def computed(var: xr.DataArray) -> xr.DataArray:

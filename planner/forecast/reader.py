@@ -61,9 +61,10 @@ def open_forecast(
     ``planner.grid.BBox``), on regular lon/lat grids, the lon/lat index ranges that the bbox's
     interpolation uses plus ``WINDOW_MARGIN_NODES`` nodes on each side (clipped at the file's
     edges). The velocities stay xarray's lazily indexed arrays until that selection is made, so
-    only the selected part is read. ``identity`` stays the whole file's; ``window`` says what was kept; resampling
-    the window onto a grid inside the bbox gives the whole file's values bit for bit. Curvilinear,
-    projected and ROMS/CROCO files keep their whole horizontal grid (``bbox`` is not used there).
+    only the selected part is read. ``identity`` stays the whole file's; ``window`` says what was
+    kept; resampling the window onto a grid inside the bbox gives the whole file's values bit for
+    bit. Curvilinear, projected and ROMS/CROCO files keep their whole horizontal grid (``bbox`` is
+    not used there).
     """
     label = os.fspath(path)
     if variables is not None:

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from planner.contract.errors import ForecastError
 from planner.forecast.cf import dim_role, read_depth_axis, read_time, velocity_factor, velocity_values
 from planner.forecast.layout import Layout, Velocities, structured_layout
-from planner.forecast.lazy import check_size, computed, lazy_variable, time_step
+from planner.forecast.lazy import check_size, computed, time_step
 from planner.forecast.request import Context, Want
 
 
@@ -156,7 +156,7 @@ def read_velocities(
 
     def values(var: xr.DataArray, name: str) -> NDArray[np.float64]:
         if want.partial:
-            var = lazy_variable(var).isel(select)
+            var = var.isel(select)  # lazy: nothing is read until computed
             check_size(var, name, label, part=part or "the whole variable")
             var = computed(var)
         elif select:

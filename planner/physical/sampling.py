@@ -358,28 +358,23 @@ def _current(  # pragma: no cover
 ) -> tuple[float, float]:
     """(u, v) of layer ``l`` at fine-grid index point (X, Y): inside a fine cell of four water nodes,
     both components with one set of weights (the same sums, in the same order, as ``_interp_slow``);
-    elsewhere the clamped, land-checking path."""
-    if X >= 0.0 and Y >= 0.0 and X < wet.shape[2] and Y < wet.shape[1] and wet[l, int(Y), int(X)]:
-        return _wet_current(corners, wet, l, X, Y)
+    elsewhere the clamped, land-checking path; NaN at a NaN point."""
+    if X >= 0.0 and Y >= 0.0 and X < wet.shape[2] and Y < wet.shape[1] and wet[l, int(Y), int(X)]:  # NaN fails each test
+        x0 = int(X)
+        y0 = int(Y)
+        fx = X - x0
+        fy = Y - y0
+        w00 = (1.0 - fx) * (1.0 - fy)
+        w01 = fx * (1.0 - fy)
+        w10 = (1.0 - fx) * fy
+        w11 = fx * fy
+        k = (l * wet.shape[1] + y0) * wet.shape[2] + x0
+        cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
+        cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
+        return cu, cv
+    if not (math.isfinite(X) and math.isfinite(Y)):
+        return math.nan, math.nan  # a point from a stage that touched land
     return _interp_slow(uf, l, X, Y), _interp_slow(vf, l, X, Y)
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _wet_current(corners: _F64, wet: _Mask, l: int, X: float, Y: float) -> tuple[float, float]:  # pragma: no cover
-    """(u, v) of layer ``l`` at (X, Y) >= 0 inside a fine cell of four water nodes: both components with
-    one set of weights (the same sums, in the same order, as ``_interp_slow``)."""
-    x0 = int(X)
-    y0 = int(Y)
-    fx = X - x0
-    fy = Y - y0
-    w00 = (1.0 - fx) * (1.0 - fy)
-    w01 = fx * (1.0 - fy)
-    w10 = (1.0 - fx) * fy
-    w11 = fx * fy
-    k = (l * wet.shape[1] + y0) * wet.shape[2] + x0
-    cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
-    cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
-    return cu, cv
 
 
 # Below it, cos d to d^4 and sin d to d^3 leave under 1e-17 (d^6 / 720 and d^5 / 120): three rows of
@@ -440,18 +435,10 @@ def _stage(  # pragma: no cover
             d = (work[ry, n] - j) * dlat_rad
             if abs(d) >= _SHORT_SERIES_RAD:
                 work[_DXM, n] = EARTH_RADIUS_M * _cos_near(cos_j, sin_j, d) * dlon_rad
-    nxw, nyw = float(wet.shape[2]), float(wet.shape[1])
     for n in range(na):
         X = work[rx, n] * refine
         Y = work[ry, n] * refine
-        if X >= 0.0 and Y >= 0.0 and X < nxw and Y < nyw and wet[la, int(Y), int(X)]:  # NaN fails every test
-            cu, cv = _wet_current(corners, wet, la, X, Y)
-        elif math.isfinite(X) and math.isfinite(Y):
-            cu, cv = _interp_slow(uf, la, X, Y), _interp_slow(vf, la, X, Y)
-        else:
-            work[_CU, n] = math.nan
-            work[_CV, n] = math.nan
-            continue
+        cu, cv = _current(uf, vf, corners, wet, la, X, Y)  # NaN after a stage on land
         wb = work[_W, n]
         if wb > 0.0:
             bu, bv = _current(uf, vf, corners, wet, lb, X, Y)

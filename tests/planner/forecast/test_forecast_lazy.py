@@ -441,7 +441,6 @@ def _bytes_read() -> int:
 def test_window_reads_only_its_part_of_the_file(tmp_path: Path) -> None:
     """Bytes read while opening: the file once for its hash, the header, and the window's chunks; not the rest."""
     from planner.forecast.lazy import computed
-    from planner.forecast.lazy import lazy_variable as _lazy
 
     path = tmp_path / "mid.nc"
     velocity_bytes = write_large(path, n_t=80, n_z=2, n_y=200, n_x=250)  # 64 MB of u and v
@@ -451,7 +450,7 @@ def test_window_reads_only_its_part_of_the_file(tmp_path: Path) -> None:
 
     # The velocities are lazily indexed: selecting from them reads nothing; loading reads the part.
     with xr.open_dataset(path, engine="netcdf4", decode_times=False) as ds:
-        lazy = _lazy(ds["u"])
+        lazy = ds["u"]
         assert lazy.shape == (80, 2, 200, 250)
         before = _bytes_read()
         part = lazy.isel(time=slice(77, 78), lat=slice(100, 141), lon=slice(100, 151))
