@@ -61,8 +61,7 @@ def add_parser(sub: Subcommands) -> None:
     fsub = fc.add_subparsers(dest="forecast_command", required=True)
     info = fsub.add_parser("info", help="describe a forecast file as the loader understands it")
     info.add_argument("file", metavar="FILE|URL", help="a netCDF file, or the http(s) URL of one (downloaded to the cache)")
-    info.add_argument("--variables", type=lambda t: t.split(","), metavar="U,V",
-                      help="U,V variable names, when not found by CF standard names")
+    _variables_option(info)
     info.add_argument("--grid-file", type=Path, help="grid file (lon/lat/mask/angle) for a forecast without them")
     info.add_argument("--cache-dir", type=Path, metavar="DIR",
                       help="cache for downloaded forecasts (default: $LRAUV_CACHE_DIR, $XDG_CACHE_HOME/lrauv or "
@@ -95,6 +94,15 @@ def add_parser(sub: Subcommands) -> None:
     tidal.add_argument("--amplitude-error", type=float,
                        help="forecast error: amplitude times 1 + F, F >= -1 (default 0)")
     _grid_and_time_options(tidal, hours=72, bbox="-118.2,33.3,-117.8,33.5")
+
+    perturb = fsub.add_parser("perturb", help="write a copy of a forecast file with its currents early or late, and stronger or weaker")
+    perturb.add_argument("file", help="forecast file to copy (netCDF)")
+    perturb.add_argument("out", type=Path, help="netCDF file to write")
+    perturb.add_argument("--phase-error-h", type=float, default=0.0,
+                         help="the copy's currents run H hours early: at time t it holds the file's t + H (default 0)")
+    perturb.add_argument("--amplitude-error", type=float, default=0.0,
+                         help="the copy's currents are times 1 + F, F >= -1 (default 0)")
+    _variables_option(perturb)
 
     ens = fsub.add_parser("ensemble", help="write a synthetic forecast ensemble: one file, u/v with a leading member dimension")
     ens.add_argument("out", type=Path, help="netCDF file to write")
@@ -130,16 +138,20 @@ def run(args: argparse.Namespace) -> int:
     if args.forecast_command == "info":
         from planner.forecast import describe, open_forecast
 
-        variables = tuple(args.variables) if args.variables else None
-        if variables is not None and len(variables) != 2:
-            raise LrauvError(f"--variables: expected two names U,V; got {args.variables}")
         from planner.cli.plan import local_forecast
 
         path = local_forecast(args.file, args.cache_dir)
-        say(describe(open_forecast(path, variables=variables, grid_file=args.grid_file)))
+        say(describe(open_forecast(path, variables=_variables(args), grid_file=args.grid_file)))
         return 0
     if args.forecast_command == "ensemble":
         say(f"wrote {write_ensemble_from_args(args)}")
+        return 0
+    if args.forecast_command == "perturb":
+        from planner.forecast.perturb import write_perturbed
+
+        path = write_perturbed(args.file, args.out, phase_error_h=args.phase_error_h,
+                               amplitude_error=args.amplitude_error, variables=_variables(args))
+        say(f"wrote {path}")
         return 0
     if args.forecast_command == "gyre":
         from planner.forecast.synthetic.double_gyre import write_gyre
@@ -159,6 +171,20 @@ def run(args: argparse.Namespace) -> int:
     path = write_synthetic(args.out, SyntheticSettings(seed=args.seed, hours=args.hours), issue_number=args.issue)
     say(f"wrote {path}")
     return 0
+
+
+def _variables_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--variables", type=lambda t: t.split(","), metavar="U,V",
+                        help="the velocity variables' names, when they cannot be found by standard or common name")
+
+
+def _variables(args: argparse.Namespace) -> tuple[str, str] | None:
+    """``--variables`` as (u, v); a list of other than two names is refused naming the option."""
+    if not args.variables:
+        return None
+    if len(args.variables) != 2:
+        raise LrauvError(f"--variables: expected two names U,V; got {','.join(args.variables)}")
+    return args.variables[0], args.variables[1]
 
 
 def settings_from_args(args: argparse.Namespace) -> Any:

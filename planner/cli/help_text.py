@@ -21,8 +21,14 @@ HELP: dict[str, tuple[str, tuple[str, ...]]] = {
              ("lrauv plan missions/demo.yaml --out demo.lrpt --plot pics",
               "lrauv plan --forecast f.nc --bbox=-118.26,33.30,-117.70,33.70 --nx 29 --ny 21 --depths 0,5,10,15 "
               "--goal=-117.80,33.40,0")),
-    "forecast": ("Inspect a forecast as the planner reads it, or write a built-in one (synthetic, gyre, tidal, ensemble).",
+    "forecast": ("Inspect a forecast as the planner reads it, write a built-in one (synthetic, gyre, tidal, ensemble), "
+                 "or a copy of one made wrong on purpose (perturb).",
                  ("lrauv forecast info f.nc", "lrauv forecast synth out/f.nc --hours 72")),
+    "forecast perturb": ("Write a copy of a forecast file whose currents run early (or late, with a negative "
+                         "phase error) and are stronger or weaker: a forecast with a known error, to fly a plan "
+                         "made on it through the original as the truth (lrauv evaluate).",
+                         ("lrauv forecast perturb hycom.nc out/hycom-early.nc --phase-error-h 1 --amplitude-error -0.2",
+                          "lrauv evaluate missions/eval-hycom.yaml --forecast out/hycom-early.nc --truth hycom.nc")),
     "forecast info": ("Describe a forecast as the planner reads it: its grid, times, depths, variables, land and "
                       "current speeds. A URL is downloaded to the cache first.",
                       ("lrauv forecast info out/f.nc", "lrauv forecast info f.nc --variables uo,vo")),
