@@ -8,7 +8,7 @@ the peak RSS, and the two tables' sizes with their upload time over a satellite 
 ``--link-bit-s`` (2,400 bit/s by default): as bytes on the wire, and framed as MAVLink FTP writes
 (the executive's upload path: 239 data bytes in each 266-byte MAVLink 2 FILE_TRANSFER_PROTOCOL frame).
 
-    .venv/bin/python bench/bench_time_varying.py [--repeat 3] [--horizon-h 72] [--forecast F.nc] [--json OUT] [--repo PATH]
+    .venv/bin/python bench/bench_time_varying.py [--repeat 3] [--horizon-h 72] [--slice-h H] [--forecast F.nc] [--json OUT] [--repo PATH]
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--horizon-h", type=float, default=72.0)
+    parser.add_argument("--slice-h", type=float, help="hours between slices (default: every forecast step, hourly)")
     parser.add_argument("--forecast", type=Path, help="default: the SCB synthetic forecast, issue 0, 72 h")
     parser.add_argument("--link-bit-s", type=float, default=2400.0)
     parser.add_argument("--json", type=Path)
@@ -50,7 +51,8 @@ def main() -> None:
                        cwd=REPO, check=True, capture_output=True)
     nx, ny = DEMO
     rows = {}
-    for name, extra in (("stationary", ()), ("time-varying", ("--time-varying", "--horizon-h", f"{args.horizon_h:g}"))):
+    slices = ("--slice-h", f"{args.slice_h:g}") if args.slice_h else ()
+    for name, extra in (("stationary", ()), ("time-varying", ("--time-varying", "--horizon-h", f"{args.horizon_h:g}", *slices))):
         out = tmp / f"{name}.lrpt"
         runs = [run_plan(args.repo, forecast, nx, ny, 1, out, model="physical", extra=extra) for _ in range(args.repeat + 1)]
         best = runs[1:] or runs
@@ -66,7 +68,8 @@ def main() -> None:
           f"table {tv['table_bytes'] / st['table_bytes']:.1f}x")
     print(f"machine: {platform.machine()}, {platform.python_version()}, best of {args.repeat} after a warm-up")
     if args.json:
-        args.json.write_text(json.dumps({"rows": rows, "horizon_h": args.horizon_h, "repeat": args.repeat}, indent=1))
+        args.json.write_text(json.dumps({"rows": rows, "horizon_h": args.horizon_h, "slice_h": args.slice_h,
+                                         "repeat": args.repeat}, indent=1))
 
 
 if __name__ == "__main__":
