@@ -403,26 +403,32 @@ def _nearest(x: float) -> int:  # pragma: no cover
 
 
 # Rows of the kernel's per-sample scratch: the step, position, time, through-water velocity, glide
-# weight, a stage's point, each stage's (dx/dt, dy/dt), and a stage's current and metric.
+# weight, a stage's point, each stage's (dx/dt, dy/dt), a stage's current, metric and bilinear
+# weights, the start point, and whether the last step was plain (``_plain_steps``).
 _H, _X, _Y, _T, _WE, _WN, _W, _PX, _PY = range(9)
 _K1, _K2, _K3, _K4 = 9, 11, 13, 15
-_CU, _CV, _DXM = 17, 18, 19
-_ROWS = 20
+_CU, _CV, _DXM, _W00, _W01, _W10, _W11 = 17, 18, 19, 20, 21, 22, 23
+_X0, _Y0, _OK = 24, 25, 26
+_ROWS = 27
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _stage(  # pragma: no cover
-    work: _F64, na: int, rx: int, ry: int, rk: int, uf: _F64, vf: _F64, corners: _F64, wet: _Mask, refine: int,
-    la: int, lb: int, j: int, cos_j: float, sin_j: float, dlat_rad: float, dlon_rad: float, dy_m: float,
+    work: _F64, kidx: _I64, na: int, rx: int, ry: int, rk: int, uf: _F64, vf: _F64, corners: _F64, wet: _Mask,
+    wet_flat: _Mask, refine: int, la: int, lb: int, j: int, cos_j: float, sin_j: float, dlat_rad: float,
+    dlon_rad: float, dy_m: float,
 ) -> None:
     """(dx/dt, dy/dt) in planning cells per second of the ``na`` running samples at the planning-index
     points in rows ``rx``, ``ry``, into rows ``rk`` and ``rk + 1``; NaN on land.
 
     Over ground = through water (rows ``_WE``, ``_WN``, m/s, members' offsets included) + the current
     of layer ``la`` blended with ``lb`` by the weight in row ``_W`` (glides); a stage after one on
-    land is NaN too. In three loops: the metric at each point's latitude (spec section 1; straight,
-    so LLVM vectorises it), the current (a read of each point's fine cell), the velocity (straight).
-    ``cos_j``, ``sin_j``: of row ``j``'s latitude, which the points are within a few rows of."""
+    land is NaN too. In straight loops that LLVM vectorises, but for one: the metric at each point's
+    latitude (spec section 1); each point's fine cell (``kidx``: its row of ``corners``, -1 outside the
+    fine grid) and bilinear weights; the current, one point at a time (the read of its cell's corners;
+    a cell with land among its nodes, or a point outside, takes ``_current``'s land-checking path,
+    with the same sums); the velocity. ``cos_j``, ``sin_j``: of row ``j``'s latitude, which the points
+    are within a few rows of; ``wet_flat``: ``wet`` flattened, indexed like ``corners``."""
     far = 0
     for n in range(na):
         d = (work[ry, n] - j) * dlat_rad
@@ -435,13 +441,43 @@ def _stage(  # pragma: no cover
             d = (work[ry, n] - j) * dlat_rad
             if abs(d) >= _SHORT_SERIES_RAD:
                 work[_DXM, n] = EARTH_RADIUS_M * _cos_near(cos_j, sin_j, d) * dlon_rad
+    nyw = wet.shape[1]
+    nxw = wet.shape[2]
     for n in range(na):
         X = work[rx, n] * refine
         Y = work[ry, n] * refine
-        cu, cv = _current(uf, vf, corners, wet, la, X, Y)  # NaN after a stage on land
+        inside = (X >= 0.0) & (Y >= 0.0) & (X < nxw) & (Y < nyw)  # NaN fails each test
+        xc = X if inside else 0.0
+        yc = Y if inside else 0.0
+        x0 = int(xc)
+        y0 = int(yc)
+        fx = xc - x0
+        fy = yc - y0
+        work[_W00, n] = (1.0 - fx) * (1.0 - fy)
+        work[_W01, n] = fx * (1.0 - fy)
+        work[_W10, n] = (1.0 - fx) * fy
+        work[_W11, n] = fx * fy
+        kidx[n] = (la * nyw + y0) * nxw + x0 if inside else -1
+    step_l = (lb - la) * nyw * nxw
+    for n in range(na):
+        k = kidx[n]
+        w00 = work[_W00, n]
+        w01 = work[_W01, n]
+        w10 = work[_W10, n]
+        w11 = work[_W11, n]
+        if k >= 0 and wet_flat[k]:
+            cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
+            cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
+        else:
+            cu, cv = _current(uf, vf, corners, wet, la, work[rx, n] * refine, work[ry, n] * refine)
         wb = work[_W, n]
         if wb > 0.0:
-            bu, bv = _current(uf, vf, corners, wet, lb, X, Y)
+            kb = k + step_l
+            if k >= 0 and wet_flat[kb]:
+                bu = w00 * corners[kb, 0] + w01 * corners[kb, 1] + w10 * corners[kb, 2] + w11 * corners[kb, 3]
+                bv = w00 * corners[kb, 4] + w01 * corners[kb, 5] + w10 * corners[kb, 6] + w11 * corners[kb, 7]
+            else:
+                bu, bv = _current(uf, vf, corners, wet, lb, work[rx, n] * refine, work[ry, n] * refine)
             cu = (1.0 - wb) * cu + wb * bu
             cv = (1.0 - wb) * cv + wb * bv
         work[_CU, n] = cu
@@ -464,16 +500,38 @@ def _next_point(work: _F64, na: int, rk: int, frac: float, glide_s: float) -> No
             work[_W, n] = (work[_T, n] + frac * work[_H, n]) / glide_s
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _plain_steps(  # pragma: no cover
+    work: _F64, na: int, gliding: bool, seeking: bool, end: float, nx: int, ny: int,
+) -> None:
+    """Row ``_OK``: 1 where the RK4 step just taken (to rows ``_PX``, ``_PY``) leaves the sample running
+    with nothing for ``_finish`` to decide (no land, still within one spacing of its start, within the
+    grid and the time limit, no goal to enter), else 0; in a straight loop, so it vectorises."""
+    if seeking:
+        for n in range(na):
+            work[_OK, n] = 0.0
+        return
+    for n in range(na):
+        xn = work[_PX, n]
+        yn = work[_PY, n]
+        ok = ((xn >= -0.5) & (xn <= nx - 0.5) & (yn >= -0.5) & (yn <= ny - 0.5)  # NaN (land) fails each test
+              & (work[_T, n] + work[_H, n] < end - 1e-9))
+        if not gliding:
+            ok = ok & (abs(xn - work[_X0, n]) < 1.0) & (abs(yn - work[_Y0, n]) < 1.0)
+        work[_OK, n] = 1.0 if ok else 0.0
+
+
 # A sample's state between RK4 steps.
 _RUNNING, _DONE, _FAILED = 0, 1, 2
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _finish(  # pragma: no cover
-    goal: _Mask, la: int, gliding: bool, x0: float, y0: float, x: float, y: float, t: float, hh: float, xn: float,
-    yn: float, end: float, nx: int, ny: int,
+    goal: _Mask, seeks: bool, la: int, gliding: bool, x0: float, y0: float, x: float, y: float, t: float, hh: float,
+    xn: float, yn: float, end: float, nx: int, ny: int,
 ) -> tuple[int, float, float, float]:
-    """End one RK4 step of a sample from (x, y) at time t to (xn, yn) over ``hh``: (state, x, y, t).
+    """End one RK4 step of a sample from (x, y) at time t to (xn, yn) over ``hh``: (state, x, y, t);
+    ``seeks``: whether there is a goal to enter (goal-free samples skip the test).
 
     A glide lasts exactly ``end``; a move until one cell spacing from the start (x0, y0) along
     either axis, entering a goal cell of layer ``la`` (``goal``), or ``end``. Crossings are
@@ -489,7 +547,7 @@ def _finish(  # pragma: no cover
             tau = min(tau, (y0 + math.copysign(1.0, yn - y0) - y) / (yn - y))
         xn = x + tau * (xn - x)
         yn = y + tau * (yn - y)
-    if not gliding:
+    if seeks and not gliding:
         gi = _nearest(xn)
         gj = _nearest(yn)
         if 0 <= gi < nx and 0 <= gj < ny and goal[la, gj, gi] and not goal[la, _nearest(y), _nearest(x)]:
@@ -530,16 +588,17 @@ def _sample_cells(  # pragma: no cover
     n_q = n_off * n_mem
     n_rc = cells.size * n_ch
     n_chunks = (n_rc + _CHUNK - 1) // _CHUNK
+    wet_flat = wet.reshape(wet.size)
+    seeks = bool(goal.any())  # goal-free samples (the whole grid's) skip the goal test
     # Parallel over chunks of _CHUNK (cell, channel) pairs, not over cells: a goal's patch of a few
     # cells still gives every core work; each chunk allocates its scratch once.
     for chunk in numba.prange(n_chunks):
         xs = np.empty(n_q)
         ys = np.empty(n_q)
         ts = np.empty(n_q)
-        state = np.empty(n_q, dtype=np.int8)
         act = np.empty(n_q, dtype=np.int64)
+        kidx = np.empty(n_q, dtype=np.int64)
         work = np.empty((_ROWS, n_q))  # per running sample, a row each (the _H ... names)
-        start = np.empty((4, n_q))  # per sample: start x, y, through-water east, north (no divisions in the loops)
         for rc in range(chunk * _CHUNK, min(n_rc, (chunk + 1) * _CHUNK)):
             r = rc // n_ch
             ch = rc % n_ch
@@ -582,62 +641,84 @@ def _sample_cells(  # pragma: no cover
             # sample's chain of stages (each needs the one before).
             gliding = glide_s > 0.0
             end = glide_s if gliding else t_max
-            first = _RUNNING if 0.0 < end - 1e-9 else _DONE
+            # The running samples' state lives in rows 0 .. na - 1 of ``work`` (``act`` says whose), so each
+            # stage's arithmetic is straight loops over contiguous rows (vectorised); only the current's
+            # corners are read one by one. A sample that ends leaves its row to the last running one.
             for q in range(n_q):
+                x = i + offsets[q // n_mem, 0]
+                y = j + offsets[q // n_mem, 1]
+                xs[q] = x
+                ys[q] = y
                 ts[q] = 0.0
-                start[0, q] = i + offsets[q // n_mem, 0]
-                start[1, q] = j + offsets[q // n_mem, 1]
-                start[2, q] = we + members[q % n_mem, 0]
-                start[3, q] = wn + members[q % n_mem, 1]
-                xs[q] = start[0, q]
-                ys[q] = start[1, q]
-                state[q] = first
-            running = n_q if first == _RUNNING else 0
-            while running > 0 and not hazard[r, ch]:
-                na = 0
-                for q in range(n_q):
-                    if state[q] == _RUNNING:
-                        act[na] = q
-                        na += 1
-                # The running samples gathered into rows of ``work`` so each stage's arithmetic is straight
-                # loops over contiguous rows (vectorised); only the current's corners are read one by one.
+                act[q] = q
+                work[_X, q] = x
+                work[_Y, q] = y
+                work[_T, q] = 0.0
+                work[_X0, q] = x
+                work[_Y0, q] = y
+                work[_WE, q] = we + members[q % n_mem, 0]
+                work[_WN, q] = wn + members[q % n_mem, 1]
+            na = n_q if 0.0 < end - 1e-9 else 0
+            while na > 0:
                 for n in range(na):
-                    q = act[n]
-                    hh = min(h, end - ts[q])
-                    work[_H, n] = hh
-                    work[_X, n] = xs[q]
-                    work[_Y, n] = ys[q]
-                    work[_T, n] = ts[q]
-                    work[_WE, n] = start[2, q]
-                    work[_WN, n] = start[3, q]
-                    work[_W, n] = ts[q] / glide_s if gliding else 0.0
-                _stage(work, na, _X, _Y, _K1, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
-                       dlon_rad, dy_m)
+                    work[_H, n] = min(h, end - work[_T, n])
+                    work[_W, n] = work[_T, n] / glide_s if gliding else 0.0
+                _stage(work, kidx, na, _X, _Y, _K1, uf, vf, corners, wet, wet_flat, refine, l, lb, j, cos_j, sin_j,
+                       dlat_rad, dlon_rad, dy_m)
                 _next_point(work, na, _K1, 0.5, glide_s)
-                _stage(work, na, _PX, _PY, _K2, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
-                       dlon_rad, dy_m)
+                _stage(work, kidx, na, _PX, _PY, _K2, uf, vf, corners, wet, wet_flat, refine, l, lb, j, cos_j, sin_j,
+                       dlat_rad, dlon_rad, dy_m)
                 _next_point(work, na, _K2, 0.5, glide_s)
-                _stage(work, na, _PX, _PY, _K3, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
-                       dlon_rad, dy_m)
+                _stage(work, kidx, na, _PX, _PY, _K3, uf, vf, corners, wet, wet_flat, refine, l, lb, j, cos_j, sin_j,
+                       dlat_rad, dlon_rad, dy_m)
                 _next_point(work, na, _K3, 1.0, glide_s)
-                _stage(work, na, _PX, _PY, _K4, uf, vf, corners, wet, refine, l, lb, j, cos_j, sin_j, dlat_rad,
-                       dlon_rad, dy_m)
+                _stage(work, kidx, na, _PX, _PY, _K4, uf, vf, corners, wet, wet_flat, refine, l, lb, j, cos_j, sin_j,
+                       dlat_rad, dlon_rad, dy_m)
                 for n in range(na):
                     hh = work[_H, n]
                     work[_PX, n] = work[_X, n] + hh / 6.0 * (work[_K1, n] + 2.0 * work[_K2, n] + 2.0 * work[_K3, n]
                                                              + work[_K4, n])
                     work[_PY, n] = work[_Y, n] + hh / 6.0 * (work[_K1 + 1, n] + 2.0 * work[_K2 + 1, n]
                                                              + 2.0 * work[_K3 + 1, n] + work[_K4 + 1, n])
+                _plain_steps(work, na, gliding, seeks and not gliding, end, nx, ny)
+                plain = 0
                 for n in range(na):
-                    q = act[n]
-                    st, xs[q], ys[q], ts[q] = _finish(goal, l, gliding, start[0, q], start[1, q], xs[q], ys[q], ts[q],
-                                                      work[_H, n], work[_PX, n], work[_PY, n], end, nx, ny)
-                    state[q] = st
+                    ok = work[_OK, n] != 0.0
+                    plain += ok
+                    work[_X, n] = work[_PX, n] if ok else work[_X, n]
+                    work[_Y, n] = work[_PY, n] if ok else work[_Y, n]
+                    work[_T, n] = work[_T, n] + work[_H, n] if ok else work[_T, n]
+                if plain == na:
+                    continue
+                ended = 0
+                for n in range(na):
+                    if work[_OK, n] != 0.0:
+                        continue
+                    st, work[_X, n], work[_Y, n], work[_T, n] = _finish(
+                        goal, seeks, l, gliding, work[_X0, n], work[_Y0, n], work[_X, n], work[_Y, n], work[_T, n],
+                        work[_H, n], work[_PX, n], work[_PY, n], end, nx, ny)
                     if st == _FAILED:
                         hazard[r, ch] = True  # one stranded sample makes the action unavailable
                         break
                     if st == _DONE:
-                        running -= 1
+                        work[_OK, n] = -1.0
+                        ended += 1
+                if hazard[r, ch]:
+                    break
+                n = 0
+                while ended > 0 and n < na:
+                    if work[_OK, n] != -1.0:
+                        n += 1
+                        continue
+                    q = act[n]
+                    xs[q] = work[_X, n]
+                    ys[q] = work[_Y, n]
+                    ts[q] = work[_T, n]
+                    ended -= 1
+                    na -= 1
+                    act[n] = act[na]
+                    for row in (_X, _Y, _T, _X0, _Y0, _WE, _WN, _OK):
+                        work[row, n] = work[row, na]
             if hazard[r, ch]:
                 continue
             for q in range(n_q):
