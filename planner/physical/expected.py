@@ -77,15 +77,15 @@ def solve_expected(model: PhysicalModel, is_goal: NDArray[np.bool_]) -> Expected
     choice = _greedy(*args.arrays(), usable, order, value, first)
     choice = _make_proper(args, choice, first, order, is_goal)
     iterations = 0
+    residual = 0.0
     for iterations in range(1, ps.max_iterations + 1):
         value = _evaluate(args, choice, order, energy=True)
-        changed = _improve(*args.arrays(), usable, order, value, choice, ps.tolerance_wh)
+        changed, residual = _improve(*args.arrays(), usable, order, value, choice, ps.tolerance_wh)
         if changed == 0:
-            break
+            break  # the values are the policy's, and the pass that changed nothing measured its residual
     else:
         raise PlannerError(f"expected criterion: policy iteration did not settle in {ps.max_iterations} iterations "
                            "(physical.max_iterations)")
-    residual = float(_residual(*args.arrays(), usable, order, value, choice))
     time_s = _evaluate(args, choice, order, energy=False)
     value[~alive] = np.inf
     time_s[~alive] = np.inf
@@ -423,32 +423,22 @@ def _greedy(  # pragma: no cover
 def _improve(  # pragma: no cover
     water: _Mask, n_ch: int, n_actions: int, ok: _Mask, energy: _F64, ptr: _I64, slot: NDArray[np.int8],
     prob: _F64, rot_wh: _F64, usable: _Mask, order: _I64, value: _F64, choice: _I8, tolerance: float,
-) -> int:
+) -> tuple[int, float]:
     """Policy improvement in place: the best pair where better than the current one by more than
-    ``tolerance``. Returns how many states changed."""
+    ``tolerance``. Returns how many states changed, and the residual: the largest amount by which
+    some action beats ``value`` (Wh; the summary's, once nothing changes)."""
     changed = 0
+    worst = 0.0
     for s in order:
         total, p_self = _q(s, choice[s], water, n_ch, energy, ptr, slot, prob, rot_wh, value)
         current = total + p_self * value[s]
         best, best_ai = _best(s, water, n_ch, n_actions, energy, ptr, slot, prob, rot_wh, usable, value)
+        if value[s] - best > worst:
+            worst = value[s] - best
         if best_ai >= 0 and best < current - tolerance:
             choice[s] = best_ai
             changed += 1
-    return changed
-
-
-@numba.njit(cache=True)
-def _residual(  # pragma: no cover
-    water: _Mask, n_ch: int, n_actions: int, ok: _Mask, energy: _F64, ptr: _I64, slot: NDArray[np.int8],
-    prob: _F64, rot_wh: _F64, usable: _Mask, order: _I64, value: _F64, choice: _I8,
-) -> float:
-    """The largest amount by which some action beats the chosen one's value (Wh)."""
-    worst = 0.0
-    for s in order:
-        best, _best_ai = _best(s, water, n_ch, n_actions, energy, ptr, slot, prob, rot_wh, usable, value)
-        if value[s] - best > worst:
-            worst = value[s] - best
-    return worst
+    return changed, worst
 
 
 @numba.njit(cache=True)
