@@ -8,7 +8,7 @@ no sampling. The heading-free channels are therefore sampled once per cell and l
 
 Outcomes are stored compactly, per (cell, channel), as a list of the outcome cells that any
 sample ended in (a *slot*: the offset within +-2 cells), with the number of samples and their
-largest energy. Cells are sampled in blocks so the dense scratch of one block is all the
+largest energy (``planner.physical.outcomes``). Cells are sampled in blocks so the dense scratch of one block is all the
 memory the sampling needs beyond its result and the currents (on the fine grid, and per fine
 cell its four nodes' currents in one row: 64 bytes a fine cell).
 
@@ -34,12 +34,12 @@ from planner.contract.progress import SILENT, Progress
 from planner.contract.settings import PhysicalSettings, PlanSettings
 from planner.contract.vehicle import power_draw_w
 from planner.grid import Grid
+from planner.physical.outcomes import SLOTS, compact, merge, splice
 
 # Sample channels per cell: DRIFT, UP, DOWN, then FORWARD along each of the eight headings, then
 # (with course offsets) FORWARD_LEFT and FORWARD_RIGHT along each (planner.contract.headings.courses_deg).
 N_CHANNELS_BEARINGS = 3 + N_HEADINGS
 N_CHANNELS_COURSES = 3 + 3 * N_HEADINGS
-SLOTS = 25  # outcome cells within +-2 cells: slot = (dj + 2) * 5 + (di + 2)
 GOAL_REACH_CELLS = 2  # a sample ends within 1.5 cells of its cell's centre: goal entry changes cells this near
 _CHUNK = 32  # (cell, channel) pairs a parallel task samples with one set of scratch arrays
 _BLOCK_CELLS = 8192  # cells sampled per block: the dense scratch is about 5 MB per 1,000 cells
@@ -228,7 +228,7 @@ def sample_transitions(
         block = cells[lo:lo + _BLOCK_CELLS]
         h, es, ts, count, emax = kernel.run(block, no_goal)
         hazard[block], esum[block], tsum[block] = h, es, ts
-        parts.append(_compact(block, n_ch, h, count, emax, n_out))
+        parts.append(compact(block, n_ch, h, count, emax, n_out))
         meter.update("sampling", lo + block.size, cells.size, unit="cells")
     ptr = np.zeros(n_cells * n_ch + 1, dtype=np.int64)
     np.cumsum(n_out, out=ptr[1:])
@@ -273,10 +273,10 @@ def _patch(stats: SampleStats, kernel: _Kernel, goal: NDArray[np.bool_]) -> Samp
     hazard, esum, tsum = stats.hazard.copy(), stats.esum.copy(), stats.tsum.copy()
     hazard[cells], esum[cells], tsum[cells] = h, es, ts
     n_out = np.diff(stats.ptr)
-    slot_p, count_p, emax_p = _compact(cells, n_ch, h, count, emax, n_out)
+    slot_p, count_p, emax_p = compact(cells, n_ch, h, count, emax, n_out)
     ptr = np.zeros_like(stats.ptr)
     np.cumsum(n_out, out=ptr[1:])
-    slot, cnt, em = _splice(stats.ptr, stats.slot, stats.count, stats.emax, ptr, cells, n_ch, slot_p, count_p, emax_p)
+    slot, cnt, em = splice(stats.ptr, stats.slot, stats.count, stats.emax, ptr, cells, n_ch, slot_p, count_p, emax_p)
     return SampleStats(n_channels=n_ch, hazard=hazard, esum=esum, tsum=tsum, ptr=ptr, slot=slot, count=cnt, emax=em,
                        n_samples=stats.n_samples, u=stats.u, v=stats.v, rot_wh=stats.rot_wh, members=stats.members)
 
@@ -308,7 +308,7 @@ def combine(stats: list[SampleStats]) -> SampleStats:
     u, v = first.u.copy(), first.v.copy()
     rot = first.rot_wh.copy()
     for s in stats[1:]:
-        ptr, slot, count, emax = _merge(out.ptr, out.slot, out.count, out.emax, s.ptr, s.slot, s.count, s.emax)
+        ptr, slot, count, emax = merge(out.ptr, out.slot, out.count, out.emax, s.ptr, s.slot, s.count, s.emax)
         land = ~(np.isfinite(s.u) & np.isfinite(s.v))
         u[land] = np.nan
         v[land] = np.nan
@@ -736,104 +736,6 @@ def _sample_cells(  # pragma: no cover
                     emax[r, ch, slot] = e
                 esum[r, ch] += e
                 tsum[r, ch] += ts[q]
-
-
-@numba.njit(cache=True)
-def _compact(  # pragma: no cover
-    cells: _I64, n_ch: int, hazard: _Mask, count: NDArray[np.int32], emax: _F64, n_out: _I64,
-) -> tuple[NDArray[np.int8], NDArray[np.int32], _F64]:
-    """The dense samples of ``cells`` as outcome lists (slots ascending); ``n_out`` gets each channel's length."""
-    total = 0
-    for r in range(cells.size):
-        for ch in range(n_ch):
-            if not hazard[r, ch]:
-                for s in range(SLOTS):
-                    if count[r, ch, s] > 0:
-                        total += 1
-    slot = np.empty(total, dtype=np.int8)
-    cnt = np.empty(total, dtype=np.int32)
-    em = np.empty(total)
-    e = 0
-    for r in range(cells.size):
-        for ch in range(n_ch):
-            k = 0
-            if not hazard[r, ch]:
-                for s in range(SLOTS):
-                    if count[r, ch, s] > 0:
-                        slot[e] = s
-                        cnt[e] = count[r, ch, s]
-                        em[e] = emax[r, ch, s]
-                        e += 1
-                        k += 1
-            n_out[cells[r] * n_ch + ch] = k
-    return slot, cnt, em
-
-
-@numba.njit(cache=True)
-def _splice(  # pragma: no cover
-    ptr: _I64, slot: NDArray[np.int8], count: NDArray[np.int32], emax: _F64, new_ptr: _I64, cells: _I64, n_ch: int,
-    slot_p: NDArray[np.int8], count_p: NDArray[np.int32], emax_p: _F64,
-) -> tuple[NDArray[np.int8], NDArray[np.int32], _F64]:
-    """The outcome lists with those of ``cells`` (in that order, from ``_compact``) replaced."""
-    n = new_ptr[-1]
-    out_slot = np.empty(n, dtype=np.int8)
-    out_count = np.empty(n, dtype=np.int32)
-    out_emax = np.empty(n)
-    patched = np.full(ptr.size - 1, -1, dtype=np.int64)
-    e = 0
-    for r in range(cells.size):
-        for ch in range(n_ch):
-            q = cells[r] * n_ch + ch
-            patched[q] = e
-            e += new_ptr[q + 1] - new_ptr[q]
-    for q in range(ptr.size - 1):
-        lo = new_ptr[q]
-        k = new_ptr[q + 1] - lo
-        if patched[q] >= 0:
-            src = patched[q]
-            for t in range(k):
-                out_slot[lo + t] = slot_p[src + t]
-                out_count[lo + t] = count_p[src + t]
-                out_emax[lo + t] = emax_p[src + t]
-        else:
-            src = ptr[q]
-            for t in range(k):
-                out_slot[lo + t] = slot[src + t]
-                out_count[lo + t] = count[src + t]
-                out_emax[lo + t] = emax[src + t]
-    return out_slot, out_count, out_emax
-
-
-@numba.njit(cache=True)
-def _merge(  # pragma: no cover
-    ptr_a: _I64, slot_a: NDArray[np.int8], count_a: NDArray[np.int32], emax_a: _F64,
-    ptr_b: _I64, slot_b: NDArray[np.int8], count_b: NDArray[np.int32], emax_b: _F64,
-) -> tuple[_I64, NDArray[np.int8], NDArray[np.int32], _F64]:
-    """Two members' outcome lists merged per channel: counts summed, the larger energy kept."""
-    nq = ptr_a.size - 1
-    ptr = np.zeros(nq + 1, dtype=np.int64)
-    cap = slot_a.size + slot_b.size
-    slot = np.empty(cap, dtype=np.int8)
-    count = np.empty(cap, dtype=np.int32)
-    emax = np.empty(cap)
-    e = 0
-    for q in range(nq):
-        a, a_end = ptr_a[q], ptr_a[q + 1]
-        b, b_end = ptr_b[q], ptr_b[q + 1]
-        while a < a_end or b < b_end:
-            if b >= b_end or (a < a_end and slot_a[a] < slot_b[b]):
-                slot[e], count[e], emax[e] = slot_a[a], count_a[a], emax_a[a]
-                a += 1
-            elif a >= a_end or slot_b[b] < slot_a[a]:
-                slot[e], count[e], emax[e] = slot_b[b], count_b[b], emax_b[b]
-                b += 1
-            else:
-                slot[e], count[e], emax[e] = slot_a[a], count_a[a] + count_b[b], max(emax_a[a], emax_b[b])
-                a += 1
-                b += 1
-            e += 1
-        ptr[q + 1] = e
-    return ptr, slot[:e].copy(), count[:e].copy(), emax[:e].copy()
 
 
 ENTRY_KERNEL = _sample_cells  # the kernel every physical plan runs: its first compile is the slow one
