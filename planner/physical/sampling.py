@@ -353,6 +353,16 @@ def _interp_slow(f: _F64, l: int, X: float, Y: float) -> float:  # pragma: no co
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _corner_sum(  # pragma: no cover
+    corners: _F64, k: int, w00: float, w01: float, w10: float, w11: float,
+) -> tuple[float, float]:
+    """(u, v) of fine cell ``k`` (its row of ``corners``) with the bilinear weights of its four nodes."""
+    cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
+    cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
+    return cu, cv
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _current(  # pragma: no cover
     uf: _F64, vf: _F64, corners: _F64, wet: _Mask, l: int, X: float, Y: float,
 ) -> tuple[float, float]:
@@ -368,10 +378,7 @@ def _current(  # pragma: no cover
         w01 = fx * (1.0 - fy)
         w10 = (1.0 - fx) * fy
         w11 = fx * fy
-        k = (l * wet.shape[1] + y0) * wet.shape[2] + x0
-        cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
-        cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
-        return cu, cv
+        return _corner_sum(corners, (l * wet.shape[1] + y0) * wet.shape[2] + x0, w00, w01, w10, w11)
     if not (math.isfinite(X) and math.isfinite(Y)):
         return math.nan, math.nan  # a point from a stage that touched land
     return _interp_slow(uf, l, X, Y), _interp_slow(vf, l, X, Y)
@@ -386,11 +393,9 @@ _SHORT_SERIES_RAD = 1e-3
 def _cos_near(cos_a: float, sin_a: float, d: float) -> float:  # pragma: no cover
     """cos(a + d) from cos a and sin a, for |d| up to a few planning rows (0.05 rad on 1-degree rows):
     the series of cos d and sin d to d^8 and d^9 leave less than 1e-19, below double rounding, and
-    cost a few multiplications where a libm cos per current evaluation was a third of the sampling;
-    below ``_SHORT_SERIES_RAD`` (as ``_stage`` computes it) the short series does."""
+    cost a few multiplications where a libm cos per current evaluation was a third of the sampling.
+    ``_stage`` calls it only at or above ``_SHORT_SERIES_RAD``; below, it uses the short series."""
     d2 = d * d
-    if abs(d) < _SHORT_SERIES_RAD:
-        return cos_a * (1.0 - d2 * (0.5 - d2 * (1.0 / 24.0))) - sin_a * (d * (1.0 - d2 * (1.0 / 6.0)))
     cos_d = 1.0 - d2 * (1.0 / 2.0) * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0) * (1.0 - d2 * (1.0 / 56.0))))
     sin_d = d * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0) * (1.0 - d2 * (1.0 / 42.0) * (1.0 - d2 * (1.0 / 72.0)))))
     return cos_a * cos_d - sin_a * sin_d
@@ -466,16 +471,14 @@ def _stage(  # pragma: no cover
         w10 = work[_W10, n]
         w11 = work[_W11, n]
         if k >= 0 and wet_flat[k]:
-            cu = w00 * corners[k, 0] + w01 * corners[k, 1] + w10 * corners[k, 2] + w11 * corners[k, 3]
-            cv = w00 * corners[k, 4] + w01 * corners[k, 5] + w10 * corners[k, 6] + w11 * corners[k, 7]
+            cu, cv = _corner_sum(corners, k, w00, w01, w10, w11)
         else:
             cu, cv = _current(uf, vf, corners, wet, la, work[rx, n] * refine, work[ry, n] * refine)
         wb = work[_W, n]
         if wb > 0.0:
             kb = k + step_l
             if k >= 0 and wet_flat[kb]:
-                bu = w00 * corners[kb, 0] + w01 * corners[kb, 1] + w10 * corners[kb, 2] + w11 * corners[kb, 3]
-                bv = w00 * corners[kb, 4] + w01 * corners[kb, 5] + w10 * corners[kb, 6] + w11 * corners[kb, 7]
+                bu, bv = _corner_sum(corners, kb, w00, w01, w10, w11)
             else:
                 bu, bv = _current(uf, vf, corners, wet, lb, work[rx, n] * refine, work[ry, n] * refine)
             cu = (1.0 - wb) * cu + wb * bu
