@@ -27,6 +27,7 @@ from planner.physical.model import (
     start_offsets,
     transition_limit_s,
 )
+from planner.physical.expected import by_cell
 from planner.physical.solve import PhysicalSolution, solve_physical
 from planner.contract.settings import Goal, PhysicalSettings, PlanSettings
 from planner.paper.solve import goal_cells_on
@@ -505,6 +506,16 @@ def test_expected_solver_equals_value_iteration(swirl_case, case):
     np.testing.assert_allclose(np.linalg.solve(np.eye(states.size) - A, d), flat(sol.time_s)[states], rtol=1e-9)
     assert sol.residual_wh <= 1e-6
     assert np.all(action[water & ~finite] == Action.UNREACHABLE)
+
+
+def test_by_cell_puts_a_cells_headings_together_in_the_searchs_cell_order():
+    n_cells = 5
+    # Internal index k * n_cells + cell; the search met cell 3 first, then 0, then 4 (cell 1 and 2: none).
+    order = np.array([1 * 5 + 3, 0 * 5 + 0, 6 * 5 + 3, 2 * 5 + 4, 7 * 5 + 0, 0 * 5 + 3, 5 * 5 + 4])
+    got = by_cell(order, n_cells)
+    assert sorted(got.tolist()) == sorted(order.tolist())  # a permutation of the same states
+    assert [(int(s) % n_cells, int(s) // n_cells) for s in got] == [(3, 0), (3, 1), (3, 6), (0, 0), (0, 7), (4, 2), (4, 5)]
+    assert by_cell(order[:0], n_cells).size == 0
 
 
 # --------------------------------------------------------------------------- 9. zero-cost cycles
