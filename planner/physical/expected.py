@@ -362,10 +362,21 @@ def _q(  # pragma: no cover
     """(c + sum over the other outcomes of P V, P(own state)) of pair (s, ai)."""
     L, ny, nx = water.shape
     k, c, l, j, i = _decode(s, L, ny, nx)
+    return _q_at(s, k, c, l, j, i, ai, L, ny, nx, n_ch, cost, ptr, slot, prob, rot, value)
+
+
+@numba.njit(cache=True, inline="always")
+def _q_at(  # pragma: no cover
+    s: int, k: int, c: int, l: int, j: int, i: int, ai: int, L: int, ny: int, nx: int, n_ch: int, cost: _F64,
+    ptr: _I64, slot: NDArray[np.int8], prob: _F64, rot: _F64, value: _F64,
+) -> tuple[float, float]:
+    """``_q`` of a state already decoded: the loops over a state's actions decode it once, not once
+    an action (its divisions by the grid's sizes cost more than the action's sum)."""
     a = PAIR_ACTIONS[ai]
     ch = action_channel(a, k)
     if ch < 0:
-        return rot[c] + value[_rotated(s, ai, L, ny, nx)], 0.0
+        k2 = (k + 1) % 8 if a == 2 else (k + 7) % 8
+        return rot[c] + value[k2 * (L * ny * nx) + c], 0.0
     q = c * n_ch + ch
     total = cost[q]
     p_self = 0.0
@@ -384,14 +395,16 @@ def _sweeps(  # pragma: no cover
     prob: _F64, rot_wh: _F64, usable: _Mask, order: _I64, value: _F64, rel_tol: float, max_sweeps: int,
 ) -> int:
     """Gauss-Seidel value iteration in ``order``, in place; returns the sweeps made."""
+    L, ny, nx = water.shape
     for sweep in range(1, max_sweeps + 1):
         worst = 0.0
         for s in order:
+            k, c, l, j, i = _decode(s, L, ny, nx)
             best = np.inf
             for ai in range(n_actions):
                 if not usable[s * 8 + ai]:
                     continue
-                total, p_self = _q(s, ai, water, n_ch, energy, ptr, slot, prob, rot_wh, value)
+                total, p_self = _q_at(s, k, c, l, j, i, ai, L, ny, nx, n_ch, energy, ptr, slot, prob, rot_wh, value)
                 if p_self < 1.0:
                     v = total / (1.0 - p_self)
                     if v < best:
@@ -412,11 +425,13 @@ def _best(  # pragma: no cover
     rot_wh: _F64, usable: _Mask, value: _F64,
 ) -> tuple[float, int]:
     """The least Q over the usable pairs of ``s`` and its action index (ties: the lower code); -1 where none."""
+    L, ny, nx = water.shape
+    k, c, l, j, i = _decode(s, L, ny, nx)
     best = np.inf
     best_ai = -1
     for ai in range(n_actions):
         if usable[s * 8 + ai]:
-            total, p_self = _q(s, ai, water, n_ch, energy, ptr, slot, prob, rot_wh, value)
+            total, p_self = _q_at(s, k, c, l, j, i, ai, L, ny, nx, n_ch, energy, ptr, slot, prob, rot_wh, value)
             qv = total + p_self * value[s]
             if qv < best:
                 best = qv
