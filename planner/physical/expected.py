@@ -209,10 +209,15 @@ def _channel_of(s: int, ai: int, L: int, ny: int, nx: int, n_ch: int) -> int:  #
 
 
 @numba.njit(cache=True, inline="always")
+def _turned(k: int, a: int) -> int:  # pragma: no cover
+    """The heading after rotation ``a``: ROTATE_LEFT (2) k + 1, ROTATE_RIGHT k - 1."""
+    return (k + 1) % 8 if a == 2 else (k + 7) % 8
+
+
+@numba.njit(cache=True, inline="always")
 def _rotated(s: int, ai: int, L: int, ny: int, nx: int) -> int:  # pragma: no cover
     k, c, _l, _j, _i = _decode(s, L, ny, nx)
-    k2 = (k + 1) % 8 if PAIR_ACTIONS[ai] == 2 else (k + 7) % 8
-    return k2 * (L * ny * nx) + c
+    return _turned(k, PAIR_ACTIONS[ai]) * (L * ny * nx) + c
 
 
 @numba.njit(cache=True)
@@ -262,30 +267,30 @@ def _reverse(  # pragma: no cover
 
 
 @numba.njit(cache=True, inline="always")
-def _available(s: int, ai: int, water: _Mask, n_ch: int, ok: _Mask) -> bool:  # pragma: no cover
-    L, ny, nx = water.shape
-    k, c, _l, _j, _i = _decode(s, L, ny, nx)
-    if not water.flat[c]:
-        return False
-    ch = action_channel(PAIR_ACTIONS[ai], k)
-    return ch < 0 or ok[c * n_ch + ch]
-
-
-@numba.njit(cache=True)
-def _all_alive(  # pragma: no cover
-    s: int, ai: int, water: _Mask, n_ch: int, ok: _Mask, ptr: _I64, slot: NDArray[np.int8], alive: _Mask,
-) -> bool:
+def _mark_usable(  # pragma: no cover
+    s: int, water: _Mask, n_ch: int, n_actions: int, ok: _Mask, ptr: _I64, slot: NDArray[np.int8], alive: _Mask,
+    usable: _Mask,
+) -> None:
+    """``usable[s * 8 + ai]`` for the actions of an alive, non-goal state ``s``: the action is available (a
+    rotation, or a channel without hazard) and all its outcomes are alive. ``s`` is decoded once."""
     L, ny, nx = water.shape
     k, c, l, j, i = _decode(s, L, ny, nx)
-    a = PAIR_ACTIONS[ai]
-    ch = action_channel(a, k)
-    if ch < 0:
-        return alive[_rotated(s, ai, L, ny, nx)]
-    q = c * n_ch + ch
-    for t in range(ptr[q], ptr[q + 1]):
-        if not alive[outcome_state(a, k, l, j, i, slot[t], L, ny, nx)]:
-            return False
-    return True
+    if not water.flat[c]:
+        return
+    for ai in range(n_actions):
+        a = PAIR_ACTIONS[ai]
+        ch = action_channel(a, k)
+        if ch < 0:
+            usable[s * 8 + ai] = alive[_turned(k, a) * (L * ny * nx) + c]
+            continue
+        q = c * n_ch + ch
+        live = ok[q]
+        if live:
+            for t in range(ptr[q], ptr[q + 1]):
+                if not alive[outcome_state(a, k, l, j, i, slot[t], L, ny, nx)]:
+                    live = False
+                    break
+        usable[s * 8 + ai] = live
 
 
 @numba.njit(cache=True)
@@ -304,10 +309,10 @@ def _proper(  # pragma: no cover
     queue = np.empty(n, dtype=np.int64)
     usable = np.zeros(n * 8, dtype=np.bool_)
     while True:
+        usable[:] = False
         for s in range(n):
-            for ai in range(n_actions):
-                usable[s * 8 + ai] = (alive[s] and not is_goal[s] and _available(s, ai, water, n_ch, ok)
-                                      and _all_alive(s, ai, water, n_ch, ok, ptr, slot, alive))
+            if alive[s] and not is_goal[s]:
+                _mark_usable(s, water, n_ch, n_actions, ok, ptr, slot, alive, usable)
         found = np.zeros(n, dtype=np.bool_)
         first[:] = -1
         head = 0
@@ -346,11 +351,8 @@ def _usable(  # pragma: no cover
     n = alive.size
     usable = np.zeros(n * 8, dtype=np.bool_)
     for s in range(n):
-        if not alive[s] or is_goal[s]:
-            continue
-        for ai in range(n_actions):
-            usable[s * 8 + ai] = (_available(s, ai, water, n_ch, ok)
-                                  and _all_alive(s, ai, water, n_ch, ok, ptr, slot, alive))
+        if alive[s] and not is_goal[s]:
+            _mark_usable(s, water, n_ch, n_actions, ok, ptr, slot, alive, usable)
     return usable
 
 
@@ -375,8 +377,7 @@ def _q_at(  # pragma: no cover
     a = PAIR_ACTIONS[ai]
     ch = action_channel(a, k)
     if ch < 0:
-        k2 = (k + 1) % 8 if a == 2 else (k + 7) % 8
-        return rot[c] + value[k2 * (L * ny * nx) + c], 0.0
+        return rot[c] + value[_turned(k, a) * (L * ny * nx) + c], 0.0
     q = c * n_ch + ch
     total = cost[q]
     p_self = 0.0
