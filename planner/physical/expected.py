@@ -220,6 +220,17 @@ def _rotated(s: int, ai: int, L: int, ny: int, nx: int) -> int:  # pragma: no co
     return _turned(k, PAIR_ACTIONS[ai]) * (L * ny * nx) + c
 
 
+@numba.njit(cache=True, inline="always")
+def _pair(k: int, c: int, ai: int, n_ch: int, n_cells: int) -> tuple[int, int, int]:  # pragma: no cover
+    """Pair ``ai`` of the state with heading ``k`` in cell ``c``: its action code, its channel's row (-1
+    for a rotation) and, for a rotation, the one state it ends in (else -1)."""
+    a = PAIR_ACTIONS[ai]
+    ch = action_channel(a, k)
+    if ch < 0:
+        return a, -1, _turned(k, a) * n_cells + c
+    return a, c * n_ch + ch, -1
+
+
 @numba.njit(cache=True)
 def _reverse(  # pragma: no cover
     water: _Mask, n_ch: int, n_actions: int, ok: _Mask, energy: _F64, ptr: _I64, slot: NDArray[np.int8], prob: _F64,
@@ -243,17 +254,14 @@ def _reverse(  # pragma: no cover
             if not water.flat[c]:
                 continue
             for ai in range(n_actions):
-                a = PAIR_ACTIONS[ai]
-                ch = action_channel(a, k)
-                if ch < 0:
-                    o = _rotated(s, ai, L, ny, nx)
+                a, q, o = _pair(k, c, ai, n_ch, n_cells)
+                if q < 0:
                     if pass_ == 0:
                         count[o + 1] += 1
                     else:
                         rev[fill[o]] = s * 8 + ai
                         fill[o] += 1
                     continue
-                q = c * n_ch + ch
                 if not ok[q]:
                     continue
                 for t in range(ptr[q], ptr[q + 1]):
@@ -278,12 +286,10 @@ def _mark_usable(  # pragma: no cover
     if not water.flat[c]:
         return
     for ai in range(n_actions):
-        a = PAIR_ACTIONS[ai]
-        ch = action_channel(a, k)
-        if ch < 0:
-            usable[s * 8 + ai] = alive[_turned(k, a) * (L * ny * nx) + c]
+        a, q, o = _pair(k, c, ai, n_ch, L * ny * nx)
+        if q < 0:
+            usable[s * 8 + ai] = alive[o]
             continue
-        q = c * n_ch + ch
         live = ok[q]
         if live:
             for t in range(ptr[q], ptr[q + 1]):
@@ -374,11 +380,9 @@ def _q_at(  # pragma: no cover
 ) -> tuple[float, float]:
     """``_q`` of a state already decoded: the loops over a state's actions decode it once, not once
     an action (its divisions by the grid's sizes cost more than the action's sum)."""
-    a = PAIR_ACTIONS[ai]
-    ch = action_channel(a, k)
-    if ch < 0:
-        return rot[c] + value[_turned(k, a) * (L * ny * nx) + c], 0.0
-    q = c * n_ch + ch
+    a, q, o = _pair(k, c, ai, n_ch, L * ny * nx)
+    if q < 0:
+        return rot[c] + value[o], 0.0
     total = cost[q]
     p_self = 0.0
     for t in range(ptr[q], ptr[q + 1]):
