@@ -8,11 +8,12 @@ without building per-(state, action) arrays:
    a value. Repeat: a pair is usable when all its outcomes are alive; a backward search from the
    goal over usable pairs finds the states that stay alive. The last search's order (nearest the
    goal first) and its first-found pairs (each steps nearer the goal) are kept.
-2. **Value iteration, Gauss-Seidel**, in that order with a cell's headings together (``by_cell``), from the exact value of those first pairs
-   (an upper bound: the values fall towards the optimum and never pass it; from below, values
-   would creep up by one cheap rotation per sweep). An action's chance of staying in its own
-   state is solved for in the update, so a slow action costs no extra sweeps. It stops when a
-   sweep lowers no value by more than 1e-4 of itself, or after ``max_iterations`` sweeps.
+2. **Value iteration, Gauss-Seidel**, in that order with a cell's headings together
+   (``by_cell``), from the exact value of those first pairs (an upper bound: the values fall
+   towards the optimum and never pass it; from below, values would creep up by one cheap
+   rotation per sweep). An action's chance of staying in its own state is solved for in the
+   update, so a slow action costs no extra sweeps. It stops when a sweep lowers no value by more
+   than 1e-4 of itself, or after ``max_iterations`` sweeps.
 3. **Policy iteration with exact evaluation.** The greedy policy of those values (where it is
    not proper, the search's pairs) is evaluated exactly: its graph's strongly connected
    components (Tarjan) are solved sinks first, one state by one division, a larger component by
@@ -198,14 +199,6 @@ def _decode(s: int, L: int, ny: int, nx: int) -> tuple[int, int, int, int, int]:
     k = s // n_cells
     c = s % n_cells
     return k, c, c // (ny * nx), (c // nx) % ny, c % nx
-
-
-@numba.njit(cache=True, inline="always")
-def _channel_of(s: int, ai: int, L: int, ny: int, nx: int, n_ch: int) -> int:  # pragma: no cover
-    """The channel row of pair (s, ai), or -1 for a rotation."""
-    k, c, _l, _j, _i = _decode(s, L, ny, nx)
-    ch = action_channel(PAIR_ACTIONS[ai], k)
-    return -1 if ch < 0 else c * n_ch + ch
 
 
 @numba.njit(cache=True, inline="always")

@@ -514,7 +514,8 @@ def test_by_cell_puts_a_cells_headings_together_in_the_searchs_cell_order():
     order = np.array([1 * 5 + 3, 0 * 5 + 0, 6 * 5 + 3, 2 * 5 + 4, 7 * 5 + 0, 0 * 5 + 3, 5 * 5 + 4])
     got = by_cell(order, n_cells)
     assert sorted(got.tolist()) == sorted(order.tolist())  # a permutation of the same states
-    assert [(int(s) % n_cells, int(s) // n_cells) for s in got] == [(3, 0), (3, 1), (3, 6), (0, 0), (0, 7), (4, 2), (4, 5)]
+    cell_heading = [(int(s) % n_cells, int(s) // n_cells) for s in got]
+    assert cell_heading == [(3, 0), (3, 1), (3, 6), (0, 0), (0, 7), (4, 2), (4, 5)]
     assert by_cell(order[:0], n_cells).size == 0
 
 
