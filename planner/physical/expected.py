@@ -105,9 +105,9 @@ def by_cell(order: NDArray[np.int64], n_cells: int) -> NDArray[np.int64]:
     Every pass over the states reads a state's channels and their outcome lists, which lie together per
     cell, and its neighbours' values. In the search's order a cell's eight headings come at eight different
     moments, so on a grid larger than the cache each pass fetched a cell's data from memory up to eight
-    times: at 4 M states a Gauss-Seidel sweep took 1.05 us a state, grouped 0.54 us. The sweeps lose a
-    little of their order for it: 14 sweeps instead of 13 at 4 M states, 11 instead of 9 on the demo grid
-    (docs/benchmarks.md)."""
+    times: at 4 M states a Gauss-Seidel sweep took 1.05 us a state, grouped 0.54 us (before a state was
+    decoded once for all its actions, which made both faster). The sweeps lose a little of their order
+    for it: 14 sweeps instead of 13 at 4 M states, 11 instead of 9 on the demo grid (docs/benchmarks.md)."""
     order = np.asarray(order, dtype=np.int64)
     cell = order % n_cells
     first = np.full(n_cells, order.size, dtype=np.int64)
@@ -208,12 +208,6 @@ def _turned(k: int, a: int) -> int:  # pragma: no cover
 
 
 @numba.njit(cache=True, inline="always")
-def _rotated(s: int, ai: int, L: int, ny: int, nx: int) -> int:  # pragma: no cover
-    k, c, _l, _j, _i = _decode(s, L, ny, nx)
-    return _turned(k, PAIR_ACTIONS[ai]) * (L * ny * nx) + c
-
-
-@numba.njit(cache=True, inline="always")
 def _pair(k: int, c: int, ai: int, n_ch: int, n_cells: int) -> tuple[int, int, int]:  # pragma: no cover
     """Pair ``ai`` of the state with heading ``k`` in cell ``c``: its action code, its channel's row (-1
     for a rotation) and, for a rotation, the one state it ends in (else -1)."""
@@ -275,9 +269,7 @@ def _mark_usable(  # pragma: no cover
     """``usable[s * 8 + ai]`` for the actions of an alive, non-goal state ``s``: the action is available (a
     rotation, or a channel without hazard) and all its outcomes are alive. ``s`` is decoded once."""
     L, ny, nx = water.shape
-    k, c, l, j, i = _decode(s, L, ny, nx)
-    if not water.flat[c]:
-        return
+    k, c, l, j, i = _decode(s, L, ny, nx)  # alive: a water state
     for ai in range(n_actions):
         a, q, o = _pair(k, c, ai, n_ch, L * ny * nx)
         if q < 0:
@@ -479,12 +471,10 @@ def _successors(  # pragma: no cover
     """The outcome states of pair (s, ai) into ``out``; returns how many."""
     L, ny, nx = water.shape
     k, c, l, j, i = _decode(s, L, ny, nx)
-    a = PAIR_ACTIONS[ai]
-    ch = action_channel(a, k)
-    if ch < 0:
-        out[0] = _rotated(s, ai, L, ny, nx)
+    a, q, o = _pair(k, c, ai, n_ch, L * ny * nx)
+    if q < 0:
+        out[0] = o
         return 1
-    q = c * n_ch + ch
     m = 0
     for t in range(ptr[q], ptr[q + 1]):
         out[m] = outcome_state(a, k, l, j, i, slot[t], L, ny, nx)
@@ -677,10 +667,8 @@ def _block(  # pragma: no cover
         s = states[r]
         ai = choice[s]
         k, cc, l, j, i = _decode(s, L, ny, nx)
-        a = PAIR_ACTIONS[ai]
-        ch = action_channel(a, k)
-        if ch < 0:
-            o = _rotated(s, ai, L, ny, nx)
+        a, q, o = _pair(k, cc, ai, n_ch, L * ny * nx)
+        if q < 0:
             rhs[r] = rot[cc]
             if comp[o] == c:
                 rows[e], cols[e], probs[e] = r, local[o], 1.0
@@ -688,7 +676,6 @@ def _block(  # pragma: no cover
             else:
                 rhs[r] += value[o]
             continue
-        q = cc * n_ch + ch
         rhs[r] = cost[q]
         for t in range(ptr[q], ptr[q + 1]):
             o = outcome_state(a, k, l, j, i, slot[t], L, ny, nx)

@@ -8,9 +8,9 @@ no sampling. The heading-free channels are therefore sampled once per cell and l
 
 Outcomes are stored compactly, per (cell, channel), as a list of the outcome cells that any
 sample ended in (a *slot*: the offset within +-2 cells), with the number of samples and their
-largest energy (``planner.physical.outcomes``). Cells are sampled in blocks so the dense scratch of one block is all the
-memory the sampling needs beyond its result and the currents (on the fine grid, and per fine
-cell its four nodes' currents in one row: 64 bytes a fine cell).
+largest energy (``planner.physical.outcomes``). Cells are sampled in blocks so the dense scratch
+of one block is all the memory the sampling needs beyond its result and the currents (on the
+fine grid, and per fine cell its four nodes' currents in one row: 64 bytes a fine cell).
 
 Goal entry (a FORWARD or DRIFT sample ends on entering a goal cell) is kept apart: the goal-free
 samples of the whole grid are computed once per forecast, and ``enter_goal`` samples again only
