@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from planner.contract.errors import ForecastError
 from planner.forecast.cf import attr, dim_role, numbers, read_depth_axis, read_time, velocity_factor, velocity_values
 from planner.forecast.layout import Components, Velocities
-from planner.forecast.lazy import check_size, computed, time_step
+from planner.forecast.lazy import check_size, read_ready, time_step
 from planner.forecast.projected import rotate
 from planner.forecast.request import Context, Fields, Want
 from planner.forecast.structured import to_tzyx
@@ -86,7 +86,7 @@ def read_c_grid(
                 ctx = replace(ctx, select={**ctx.select, **step})
         for var, name in ((u_var, u_name), (v_var, v_name)):
             check_size(var, name, label, part=part or "the whole variable")
-        u_var, v_var = computed(u_var), computed(v_var)
+        u_var, v_var = read_ready(u_var), read_ready(v_var)
     u = velocity_values(_to_c_tsyx(u_var, u_roles), u_name, label, notes)
     v = velocity_values(_to_c_tsyx(v_var, v_roles), v_name, label, notes)
     (nyu, nxu), (nyv, nxv) = u.shape[-2:], v.shape[-2:]

@@ -2,9 +2,9 @@
 
 The velocities stay xarray's lazily indexed backend arrays until the time step, the member and the
 lon/lat window are selected, so only that part is read: ``isel`` with slices and integers composes
-the indexers and reads nothing, and ``computed`` reads that hyperslab from the netCDF file. dask's
-chunks would read the same part, and importing dask and distributed for them cost a plan half a
-second.
+the indexers and reads nothing, and the first ``.values`` reads that hyperslab from the netCDF file.
+dask's chunks would read the same part, and importing dask and distributed for them cost a plan
+half a second.
 """
 
 from __future__ import annotations
@@ -41,11 +41,13 @@ def check_axes(var: xr.DataArray, name: str, label: str) -> None:
             )
 
 
-def computed(var: xr.DataArray) -> xr.DataArray:
-    """Values of a selection, read in this thread (netCDF reads are not thread-safe); a dask-backed
-    one (a caller's own chunks) is computed with dask's synchronous scheduler."""
+def read_ready(var: xr.DataArray) -> xr.DataArray:
+    """A selection ready for its one read, in this thread (netCDF reads are not thread-safe): a
+    dask-backed one (a caller's own chunks) computed with dask's synchronous scheduler; a lazily
+    indexed one as it is, read by its caller's ``.values``. (``load()`` would read the same bytes,
+    but first imports dask, a tenth of a second, to ask whether the variable is dask's.)"""
     if var.chunks is None:
-        return var.load()
+        return var
     return var.compute(scheduler="synchronous")
 
 

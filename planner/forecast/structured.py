@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from planner.contract.errors import ForecastError
 from planner.forecast.cf import dim_role, read_depth_axis, read_time, velocity_factor, velocity_values
 from planner.forecast.layout import Layout, Velocities, structured_layout
-from planner.forecast.lazy import check_size, computed, time_step
+from planner.forecast.lazy import check_size, read_ready, time_step
 from planner.forecast.request import Context, Want
 
 
@@ -156,9 +156,9 @@ def read_velocities(
 
     def values(var: xr.DataArray, name: str) -> NDArray[np.float64]:
         if want.partial:
-            var = var.isel(select)  # lazy: nothing is read until computed
+            var = var.isel(select)  # lazy: nothing is read until .values
             check_size(var, name, label, part=part or "the whole variable")
-            var = computed(var)
+            var = read_ready(var)
         elif select:
             var = var.isel(select)
         return velocity_values(to_tzyx(var, header.roles), name, label, notes)

@@ -440,7 +440,7 @@ def _bytes_read() -> int:
 @pytest.mark.skipif(not os.path.exists("/proc/self/io"), reason="needs Linux /proc/self/io")
 def test_window_reads_only_its_part_of_the_file(tmp_path: Path) -> None:
     """Bytes read while opening: the file once for its hash, the header, and the window's chunks; not the rest."""
-    from planner.forecast.lazy import computed
+    from planner.forecast.lazy import read_ready
 
     path = tmp_path / "mid.nc"
     velocity_bytes = write_large(path, n_t=80, n_z=2, n_y=200, n_x=250)  # 64 MB of u and v
@@ -455,7 +455,7 @@ def test_window_reads_only_its_part_of_the_file(tmp_path: Path) -> None:
         before = _bytes_read()
         part = lazy.isel(time=slice(77, 78), lat=slice(100, 141), lon=slice(100, 151))
         assert _bytes_read() - before < 10_000
-        values = computed(part).values
+        values = read_ready(part).values
         read = _bytes_read() - before
         assert values.shape == (1, 2, 41, 51) and read < 4 * 2 * 200 * 250 * 4  # about one time step's chunk
 
@@ -470,6 +470,15 @@ def test_window_reads_only_its_part_of_the_file(tmp_path: Path) -> None:
     assert whole_extra >= velocity_bytes  # the instrument sees a whole read
     assert window_extra < 0.2 * velocity_bytes
     assert window.shape == (1, 2, 45, 55) and window.identity == whole.identity
+
+
+def test_a_window_is_read_without_importing_dask(synthetic_forecast: Path) -> None:
+    """xarray's ``load()`` imports dask only to ask whether a variable is dask's; a plan's read does not."""
+    code = ("import sys; from planner.forecast import open_forecast; "
+            f"fc = open_forecast({str(synthetic_forecast)!r}, time_index=1); "
+            "print(fc.shape, 'dask' in sys.modules, 'xarray' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, check=True).stdout
+    assert out.split()[-2:] == ["False", "True"], out
 
 
 # Peak RSS of the measuring process itself: VmHWM, the high-water mark of its own memory map.
