@@ -159,7 +159,12 @@ def _evaluate(args: _Model, choice: _I8, order: _I64, *, energy: bool) -> _F64:
     """The policy's exact expected energy (or duration) to the goal: components sinks first."""
     n = args.water.size * 8
     cost = args.energy if energy else args.duration
-    rot = args.rot_wh if energy else np.full_like(args.rot_wh, args.rot_s)
+    rot = args.rot_wh
+    if not energy:
+        rot = np.full_like(args.rot_wh, args.rot_s)
+        # As read-only as the energies: numba compiles and loads one kernel per signature, and a
+        # read-only array is another type.
+        rot.flags.writeable = args.rot_wh.flags.writeable
     is_goal = np.zeros(n, dtype=np.bool_)  # goal states are outside ``order`` and keep 0
     comp, n_comp = _components(*args.arrays(), choice, order, is_goal)
     members, comp_ptr = _group(comp, order, n_comp)

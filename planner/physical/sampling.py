@@ -155,6 +155,10 @@ class _Kernel:
         esum = np.zeros((n, self.n_channels))
         tsum = np.zeros((n, self.n_channels))
         hazard = np.zeros((n, self.n_channels), dtype=np.bool_)
+        # numba compiles (and loads from its cache) one kernel per signature, and a read-only array is another
+        # type: a goal mask that arrives read-only would cost a second compile of the kernel, and every plan
+        # a second load of it.
+        goal = np.require(goal, dtype=np.bool_, requirements=["C", "W"])
         _sample_cells(cells, self.uf, self.vf, self.corners, self.wet, self.water, goal, self.refine, self.lat0,
                       self.dlat, self.dlon_rad, self.dy_m, self.depth_m, self.course_rad, self.offsets, self.members,
                       self.speed, self.glide_rate, self.t_max, self.rk4_steps, self.powers, count, emax, esum, tsum, hazard)

@@ -245,3 +245,25 @@ def test_old_paper_tables_still_load_and_bad_physical_headers_are_refused(physic
     ):
         with pytest.raises(TableError, match=message):
             PolicyTable.from_bytes(_pack({**table.header(), "physical": broken}, table.water, table.actions))
+
+
+# --------------------------------------------------------------------------- compiled kernels
+
+_ONE_SIGNATURE = r"""
+import sys, tempfile
+from pathlib import Path
+from tests.support.warm_kernels import warm
+import planner.physical.expected as expected, planner.physical.sampling as sampling
+with tempfile.TemporaryDirectory() as tmp:
+    assert warm(Path(tmp)) == 0
+print(len(sampling.ENTRY_KERNEL.signatures), len(expected._solve_components.signatures))
+"""
+
+
+def test_a_plan_compiles_and_loads_each_large_kernel_once():
+    """numba compiles a kernel, and loads it from its cache in every process, once per signature, and a
+    read-only array is another type than a writable one: the goal patch's mask and the time's rotation
+    costs must arrive as the whole grid's mask and the energies do, or the kernel compiles twice."""
+    out = subprocess.run([sys.executable, "-c", _ONE_SIGNATURE], cwd=REPO, capture_output=True, text=True,
+                         timeout=600, check=True).stdout
+    assert out.split() == ["1", "1"], out
