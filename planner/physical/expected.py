@@ -162,8 +162,8 @@ def _evaluate(args: _Model, choice: _I8, order: _I64, *, energy: bool) -> _F64:
     rot = args.rot_wh
     if not energy:
         rot = np.full_like(args.rot_wh, args.rot_s)
-        # As read-only as the energies: numba compiles and loads one kernel per signature, and a
-        # read-only array is another type.
+        # As read-only as rot_wh: numba compiles (and loads) a kernel once per signature, and a
+        # read-only array is another type than a writable one.
         rot.flags.writeable = args.rot_wh.flags.writeable
     is_goal = np.zeros(n, dtype=np.bool_)  # goal states are outside ``order`` and keep 0
     comp, n_comp = _components(*args.arrays(), choice, order, is_goal)
