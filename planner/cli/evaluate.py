@@ -89,6 +89,12 @@ def run(args: argparse.Namespace) -> int:
     summaries = summarise(campaign.results, methods)
     resolution = resolution_change(campaign) if args.resolution else None
     say(format_table(summaries))
+    # A run cut before the mission's own limit may be a vehicle waiting for a tide (docs/evaluation.md).
+    timed_out = sum(s.outcomes["timed_out"] for s in summaries)
+    mission_h = mission.safety.max_mission_time_s / 3600.0
+    if timed_out and args.max_hours < mission_h:
+        say(f"note       {timed_out} run(s) timed out at {args.max_hours:g} h (--max-hours); the mission allows "
+            f"{mission_h:g} h")
     if resolution is not None:
         for m, r in resolution.items():
             say(f"resolution {m}: predicted start cost changes by median {r['median']:.1%}, p90 {r['p90']:.1%},"

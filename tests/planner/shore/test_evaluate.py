@@ -31,6 +31,7 @@ from planner.shore.evaluation.campaign import (
     start_state,
 )
 from planner.cli import main
+from planner.cluster import IN_PROCESS
 from planner.forecast.synthetic.double_gyre import DoubleGyreSettings, write_gyre
 from planner.contract.errors import LrauvError
 from planner.shore.evaluation.runs import (
@@ -164,6 +165,28 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
     for name in ("outcomes.png", "energy.png"):
         data = (out / name).read_bytes()
         assert data[:8] == PNG_SIGNATURE and len(data) > 1000, name
+
+
+@pytest.mark.parametrize("mission_h, noted", [(48.0, True), (0.05, False)])
+def test_runs_cut_before_the_missions_limit_are_noted(gyre, tmp_path, capsys, mission_h, noted):
+    # Three minutes are too short for any run to arrive: each times out at --max-hours. The note says so only
+    # when the mission itself would have let the vehicle go on.
+    text = gyre["mission"].read_text()
+    assert "max_mission_time_h: 48" in text
+    mission_path = tmp_path / "mission.yaml"
+    mission_path.write_text(text.replace("max_mission_time_h: 48", f"max_mission_time_h: {mission_h:g}"))
+    capsys.readouterr()
+    rc = main(["evaluate", str(mission_path), "--truth", str(gyre["truth"]), "--starts", "3", "--dt-s", "5",
+               "--max-hours", "0.05", "--methods", "naive", "--scheduler", IN_PROCESS, "--quiet"])
+    printed = capsys.readouterr()
+    assert rc == 0, printed.err
+    row = next(line.split() for line in printed.out.splitlines() if line.startswith("naive "))
+    assert row[6] == "3", printed.out  # the timeout column
+    notes = [line for line in printed.out.splitlines() if line.startswith("note")]
+    if noted:
+        assert notes == ["note       3 run(s) timed out at 0.05 h (--max-hours); the mission allows 48 h"], printed.out
+    else:
+        assert notes == [], printed.out
 
 
 def test_same_spec_same_results(gyre, mission):
