@@ -45,6 +45,12 @@ def grid_of(size: str) -> tuple[int, int, int]:
     return (DEMO[0] - 1) * k + 1, (DEMO[1] - 1) * k + 1, k
 
 
+def compile_bytecode(repo: Path) -> None:
+    """The checkout's bytecode, as ``make`` compiles it: old and new code then start alike."""
+    subprocess.run([sys.executable, "-m", "compileall", "-q", "planner", "executive", "vehicle_sim"], cwd=repo,
+                   check=True, stdout=subprocess.DEVNULL)
+
+
 def run_plan(repo: Path, forecast: Path, nx: int, ny: int, radius: int, out: Path, *,
              model: str, extra: tuple[str, ...] = ()) -> tuple[float, float, int, str, float]:
     """One ``lrauv plan`` process: (reported plan s, wall s, peak RSS bytes, its output, reported solve s)."""
@@ -88,6 +94,7 @@ def main() -> None:
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}; "
           f"code: {args.repo}")
+    compile_bytecode(args.repo)
     with tempfile.TemporaryDirectory() as tmp:
         forecast = Path(tmp) / "forecast.nc"
         subprocess.run([sys.executable, "-m", "planner.cli", "forecast", "synth", str(forecast), "--issue", "0"],

@@ -22,7 +22,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bench_physical_scale import DEMO, REPO, run_plan
+from bench_physical_scale import DEMO, REPO, compile_bytecode, run_plan
 
 FTP_DATA = 239  # bytes of file per FILE_TRANSFER_PROTOCOL message (MAVLink FTP "Payload Format")
 FTP_FRAME = 10 + 3 + 251 + 2  # MAVLink 2 header, target network/system/component, payload, checksum
@@ -43,6 +43,7 @@ def main() -> None:
     parser.add_argument("--json", type=Path)
     parser.add_argument("--repo", type=Path, default=REPO, help="the checkout to run (default: this one)")
     args = parser.parse_args()
+    compile_bytecode(args.repo)
     tmp = Path(tempfile.mkdtemp(prefix="bench-tv-"))
     forecast = args.forecast
     if forecast is None:
