@@ -6,6 +6,7 @@ failure leaves the old file untouched and no temporary file behind.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from collections.abc import Iterator
@@ -15,10 +16,24 @@ from pathlib import Path
 
 @contextmanager
 def atomic_target(path: str | os.PathLike[str]) -> Iterator[Path]:
-    """Yield a temporary path to write; on success it replaces ``path`` (mode 0644)."""
+    """Yield a temporary path to write; on success it replaces ``path`` (mode 0644).
+
+    A folder that cannot hold the file is refused before anything is written, and an error of the
+    temporary file's names ``path``: the user gave that name, not the temporary one.
+    """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    if not str(path):
+        raise FileNotFoundError(errno.ENOENT, "expected a file name; got an empty one", "''")
+    if target.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a folder: expected a file name", str(path))
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError as exc:  # a file stands where a folder of the path should be
+        raise NotADirectoryError(errno.ENOTDIR, "is a file: expected a folder", exc.filename) from None
+    try:
+        fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as exc:
+        raise OSError(exc.errno, f"cannot write a file here: {exc.strerror}", str(target)) from None
     os.close(fd)
     tmp = Path(name)
     try:
@@ -27,6 +42,11 @@ def atomic_target(path: str | os.PathLike[str]) -> Iterator[Path]:
             os.fsync(handle.fileno())
         os.chmod(tmp, 0o644)
         os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename not in (str(tmp), name):
+            raise
+        raise OSError(exc.errno, exc.strerror, str(target)) from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
