@@ -134,7 +134,7 @@ class Executive(PlanChanges, StationLink):
         if config.gcs_link is not None:
             self.gcs = bridge.open_link(config.gcs_link, source_system=bridge.EXECUTIVE_SYSTEM,
                                         source_component=bridge.EXECUTIVE_COMPONENT,
-                                        client_timeout_s=config.gcs_client_timeout_s)
+                                        client_timeout_s=config.gcs_client_timeout_s, flag="--gcs")
             self.gcs_mav = bridge.new_mav(self.gcs, streams=self.streams, link_id=signing.LINK_ID_GROUND_STATION)
         self.router = ground_station.Router(autopilot_system=config.autopilot_system)  # the ground station's traffic
         # UDP carries whole frames in each datagram: the parser starts afresh with each, so the tail of

@@ -63,7 +63,7 @@ _SEVERITY = {"debug": mavlink.MAV_SEVERITY_DEBUG, "info": mavlink.MAV_SEVERITY_I
 
 
 def open_link(address: str, *, source_system: int, source_component: int,
-              client_timeout_s: float | None = None) -> Any:
+              client_timeout_s: float | None = None, flag: str = "--link") -> Any:
     """A pymavlink connection (``mavutil.mavlink_connection``) that speaks MAVLink 2 from its first frame.
 
     mavutil picks its dialect module from the ``MAVLINK20`` environment variable when it is
@@ -73,32 +73,55 @@ def open_link(address: str, *, source_system: int, source_component: int,
     ``udpout:``) give a ``UdpLink``: it knows each datagram's source, can be locked to one
     peer, and (listening) replies only to clients heard within ``client_timeout_s`` wall seconds.
     TCP addresses (``tcp:``, ``tcpin:``) give a ``TcpLink``: read in whole buffers, and
-    ``closed`` once the peer has closed the connection.
+    ``closed`` once the peer has closed the connection. ``flag`` names the option in an error.
     """
     from pymavlink import mavutil
 
     kind, _, rest = address.partition(":")
-    if kind in ("udpin", "udp", "udpout"):
-        conn: Any = _udp_link_class()(rest, listen=kind != "udpout", source_system=source_system,
-                            source_component=source_component, client_timeout_s=client_timeout_s)
-    elif kind in ("tcp", "tcpin"):
-        conn = _tcp_link_classes()[kind == "tcpin"](rest, source_system=source_system,
-                                                     source_component=source_component)
+    if kind in ("udpin", "udp", "udpout", "tcp", "tcpin"):
+        _check_host_port(address, kind, rest, flag)
+        try:
+            if kind in ("udpin", "udp", "udpout"):
+                conn: Any = _udp_link_class()(rest, listen=kind != "udpout", source_system=source_system,
+                                              source_component=source_component, client_timeout_s=client_timeout_s)
+            else:
+                conn = _tcp_link_classes()[kind == "tcpin"](rest, source_system=source_system,
+                                                             source_component=source_component)
+        except (OSError, ValueError) as exc:  # no such host, a port in use, nobody listening (tcp:)
+            raise ExecutiveError(f"{flag} {address}: cannot open: {exc}") from None
     else:  # a serial device, DEVICE or DEVICE,BAUD (ArduPilot's SERIALn_BAUD: 115200 unless set)
         device, _, baud = address.partition(",")
         if baud and not baud.isdigit():
-            raise ExecutiveError(f"--link {address!r}: expected a serial DEVICE,BAUD with a whole baud rate"
+            raise ExecutiveError(f"{flag} {address!r}: expected a serial DEVICE,BAUD with a whole baud rate"
                                  " (e.g. /dev/ttyAMA0,921600), or udpin:/udpout:/tcp:/tcpin: HOST:PORT")
         try:
             conn = mavutil.mavlink_connection(device, baud=int(baud or SERIAL_BAUD), source_system=source_system,
                                               source_component=source_component)
         except OSError as exc:  # pyserial's SerialException is one: no such device, no permission
-            raise ExecutiveError(f"--link {address!r}: cannot open the serial device: {exc}") from None
+            raise ExecutiveError(f"{flag} {address!r}: cannot open the serial device: {exc}") from None
+        except ValueError as exc:  # mavutil read an unknown KIND:REST as one of its own forms and failed
+            raise ExecutiveError(f"{flag} {address!r}: cannot open it ({exc}); expected udpin:/udpout:/tcp:/tcpin:"
+                                 "HOST:PORT or a serial DEVICE[,BAUD]") from None
     conn.mav = mavlink.MAVLink(conn, srcSystem=source_system, srcComponent=source_component)
     conn.mav.robust_parsing = True
     conn.WIRE_PROTOCOL_VERSION = mavlink.WIRE_PROTOCOL_VERSION
     conn.first_byte = False
     return conn
+
+
+def _check_host_port(address: str, kind: str, rest: str, flag: str) -> None:
+    """``rest`` of a network address is HOST:PORT with a port 0..65535 and, where the host is written as
+    numbers, an IPv4 address: pymavlink would fail on it with a traceback, or send to nowhere."""
+    host, sep, port = rest.rpartition(":")
+    numeric = host.replace(".", "").isdigit()
+    if not sep or not host or not port.isdigit() or int(port) > 65535 or (numeric and not _is_ipv4(host)):
+        raise ExecutiveError(f"{flag} {address!r}: expected {kind}:HOST:PORT, a port 0..65535 "
+                             f"(e.g. {kind}:127.0.0.1:14550)")
+
+
+def _is_ipv4(host: str) -> bool:
+    parts = host.split(".")
+    return len(parts) == 4 and all(p.isdigit() and int(p) <= 255 for p in parts)
 
 
 def _udp_link_class() -> type:

@@ -7,7 +7,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from planner.contract.arguments import Subcommands
+from planner.contract.arguments import Subcommands, mavlink_id, seconds
 
 
 def add_parser(sub: Subcommands) -> None:
@@ -18,9 +18,9 @@ def add_parser(sub: Subcommands) -> None:
     up.add_argument("--table", type=Path, action="append", default=[],
                     help="a ready policy table for one of the goals (repeatable); other goals are planned here")
     up.add_argument("--forecast", type=Path, help="forecast to plan on (default: the mission's source)")
-    up.add_argument("--target-system", type=int, help="the executive's MAVLink system (default 1)")
-    up.add_argument("--target-component", type=int, help="the executive's MAVLink component (default 191)")
-    up.add_argument("--timeout-s", type=float, default=5.0, help="MAVLink FTP: seconds to wait for each reply before resending (default 5)")
+    up.add_argument("--target-system", type=mavlink_id, help="the executive's MAVLink system (default 1)")
+    up.add_argument("--target-component", type=mavlink_id, help="the executive's MAVLink component (default 191)")
+    up.add_argument("--timeout-s", type=seconds, default=5.0, help="MAVLink FTP: seconds to wait for each reply before resending (default 5)")
     up.add_argument("--signing-key-file", type=Path, metavar="KEY",
                     help="MAVLink 2 signing key (32 bytes, or 64 hex digits) to sign with"
                          " (default: the mission's signing section; docs/missions.md)")

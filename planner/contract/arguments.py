@@ -5,11 +5,13 @@ from __future__ import annotations
 import argparse
 import math
 import re
-from typing import Any, TypeAlias
+from collections.abc import Callable
+from typing import Any, TypeAlias, TypeVar
 
 # Longitudes west of Greenwich are negative: `--start -118.1,33.45` must read as a value.
 # Python 3.13's argparse accepts it; 3.11/3.12 take anything but "-1" or "-1.5" for an option.
 _NEGATIVE_NUMBER = re.compile(r"^-\.?\d")
+T = TypeVar("T", int, float)
 
 
 class CommandParser(argparse.ArgumentParser):
@@ -36,3 +38,29 @@ def floats(text: str, n: int | None, what: str) -> list[float]:
     if not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"{what}: expected finite numbers; got {text!r}")
     return values
+
+
+
+def count(text: str) -> int:
+    """A whole number >= 1 (workers); an argparse type."""
+    return _checked(text, int, lambda v: v >= 1, "a whole number >= 1")
+
+
+def mavlink_id(text: str) -> int:
+    """A MAVLink system or component id, 0..255 (one byte on the wire); an argparse type."""
+    return _checked(text, int, lambda v: 0 <= v <= 255, "a MAVLink id 0..255")
+
+
+def seconds(text: str) -> float:
+    """A finite number of seconds > 0 (a timeout, an interval); an argparse type."""
+    return _checked(text, float, lambda v: math.isfinite(v) and v > 0, "a number of seconds > 0")
+
+
+def _checked(text: str, parse: Callable[[str], T], ok: Callable[[T], bool], expected: str) -> T:
+    try:
+        value = parse(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}; got {text!r}") from None
+    if not ok(value):
+        raise argparse.ArgumentTypeError(f"expected {expected}; got {text}")
+    return value

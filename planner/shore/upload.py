@@ -159,7 +159,7 @@ def _connect(address: str) -> Any:  # a pymavlink connection: pymavlink has no t
     from executive.mavlink_bridge import open_link
 
     try:
-        return open_link(address, source_system=GCS_SYSTEM, source_component=GCS_COMPONENT)
+        return open_link(address, source_system=GCS_SYSTEM, source_component=GCS_COMPONENT, flag="--to")
     except OSError as exc:
         raise ShoreError(f"--to {address}: cannot open: {exc}") from None
 

@@ -11,6 +11,8 @@ import os
 import socket
 from pathlib import Path
 
+import pytest
+
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
@@ -186,3 +188,31 @@ def test_a_bad_serial_link_is_one_clear_line(demo_plan, tmp_path: Path, capsys):
         len(err.splitlines()) == 1, err
     assert lrauv(["exec", "--table", table, "--link", "/dev/ttyS0,fast", "--log", str(tmp_path / "y.mcap")]) == 2
     assert "expected a serial DEVICE,BAUD with a whole baud rate" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("flag", "address", "words"), [
+    ("--link", "bogus:foo", "--link 'bogus:foo': cannot open it (invalid literal"),
+    ("--link", "udpout:127.0.0.1", "--link 'udpout:127.0.0.1': expected udpout:HOST:PORT, a port 0..65535"),
+    ("--link", "udpout:127.0.0.1:99999", "--link 'udpout:127.0.0.1:99999': expected udpout:HOST:PORT"),
+    ("--link", "udpout:999.1.1.1:14550", "--link 'udpout:999.1.1.1:14550': expected udpout:HOST:PORT"),
+    ("--gcs", "udpin:0.0.0.0:notaport", "--gcs 'udpin:0.0.0.0:notaport': expected udpin:HOST:PORT"),
+])
+def test_a_bad_network_link_is_one_clear_line(demo_plan, tmp_path: Path, capsys, flag, address, words):
+    from planner.cli import main as lrauv
+
+    table = str(demo_plan.table.save(tmp_path / "t.lrpt"))
+    link = ["--link", "udpin:127.0.0.1:0"] if flag == "--gcs" else []
+    assert lrauv(["exec", "--table", table, *link, flag, address, "--log", str(tmp_path / "x.mcap")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"lrauv: error: {words}") and len(err.splitlines()) == 1, err
+
+
+def test_a_bad_upload_address_is_one_clear_line(demo_plan, tmp_path: Path, capsys):
+    from planner.cli import main as lrauv
+    from tests.support.helpers import DEMO_MISSION
+
+    table = str(demo_plan.table.save(tmp_path / "t.lrpt"))
+    assert lrauv(["upload", str(DEMO_MISSION), "--to", "udpout:localhost", "--table", table]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "lrauv: error: --to 'udpout:localhost': expected udpout:HOST:PORT, a port 0..65535 " \
+                  "(e.g. udpout:127.0.0.1:14550)", err
