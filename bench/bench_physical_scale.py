@@ -31,7 +31,10 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 DEMO = (29, 21)
-_PLAN = re.compile(r"plan ([0-9.]+) s \((?:sampling ([0-9.]+) s, )?transitions ([0-9.]+) s, solve ([0-9.]+) s\)")
+# Both forms the command has printed: "(sampling S s, transitions T s, solve V s)" and, since 2026-11-29,
+# "(transitions T s, of which sampling S s; solve V s)"; old code is timed the same way.
+_PLAN = re.compile(r"plan ([0-9.]+) s \((?:sampling [0-9.]+ s, )?transitions ([0-9.]+) s(?:, of which sampling [0-9.]+ s)?"
+                   r"[,;] solve ([0-9.]+) s\)")
 _PAPER_PLAN = re.compile(r"plan ([0-9.]+) s")
 
 
@@ -73,7 +76,7 @@ def run_plan(repo: Path, forecast: Path, nx: int, ny: int, radius: int, out: Pat
     match = _PLAN.search(flat) if model == "physical" else _PAPER_PLAN.search(flat)
     if match is None:
         raise SystemExit(f"no plan time in the output of {' '.join(cmd)}:\n{stdout}")
-    solve = float(match.group(4)) if model == "physical" else float(match.group(1))
+    solve = float(match.group(3)) if model == "physical" else float(match.group(1))
     return float(match.group(1)), wall, rss, stdout, solve
 
 

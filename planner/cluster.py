@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
@@ -23,6 +24,8 @@ T = TypeVar("T")
 R = TypeVar("R")
 IN_PROCESS = "in-process"
 _CONNECT_TIMEOUT_S = 5.0
+# A scheduler's address as Dask writes it: [PROTOCOL://]HOST:PORT, an IPv6 host in brackets.
+_SCHEDULER_ADDRESS = re.compile(r"(?:[a-z][a-z0-9+.-]*://)?(?:\[[0-9A-Fa-f:.]+\]|[^\s:/\[\]]+):[0-9]{1,5}")
 
 
 class Runner(Protocol):
@@ -82,9 +85,12 @@ def open_runner(scheduler: str | None = None, *, workers: int | None = None) -> 
     except ImportError as exc:  # pragma: no cover - dask is a dependency
         raise PlannerError(f"--scheduler: Dask's distributed package is not installed ({exc}); use --scheduler {IN_PROCESS}") from None
     if scheduler is not None:
+        if _SCHEDULER_ADDRESS.fullmatch(scheduler) is None:
+            raise PlannerError(f"--scheduler {scheduler!r}: expected tcp://HOST:PORT of a running `dask scheduler`, "
+                               f"or {IN_PROCESS}")
         try:
             client = Client(scheduler, timeout=_CONNECT_TIMEOUT_S, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:
             raise PlannerError(f"--scheduler {scheduler}: cannot reach a Dask scheduler there ({exc}); expected "
                                f"tcp://HOST:PORT of a running `dask scheduler`, or {IN_PROCESS}") from None
         with client:

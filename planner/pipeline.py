@@ -14,13 +14,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.cluster import InProcess, Runner, open_runner
-from planner.contract.errors import CoverageError, ForecastError, GridError, PlannerError
+from planner.contract.errors import CoverageError, ForecastError, GoalError, GridError, PlannerError
 from planner.forecast import (
     Forecast,
     ForecastTimes,
     ensemble_size,
     file_identity,
     forecast_times,
+    is_periodic_lon,
     lon_shifts,
     nearest_time_index,
     open_forecast,
@@ -143,7 +144,8 @@ def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
     bbox = vehicle_longitudes(
         BBox(west_deg=float(lon[0]), south_deg=float(lat[0]), east_deg=float(lon[-1]), north_deg=float(lat[-1])))
     return Grid.from_bbox(
-        bbox, nx=request.nx or lon.size, ny=request.ny or lat.size, depths_m=list(request.depths_m)
+        bbox, nx=lon.size if request.nx is None else request.nx, ny=lat.size if request.ny is None else request.ny,
+        depths_m=list(request.depths_m)
     )
 
 
@@ -163,12 +165,19 @@ def native_spacing_deg(forecast: Forecast) -> float | None:
     return float(min(np.abs(np.diff(lon)).min(), np.abs(np.diff(lat)).min()))
 
 
-def check_coverage(forecast: Forecast, grid: Grid) -> None:
-    """Refuse a bbox that lies wholly outside the forecast's longitude/latitude range.
+def check_coverage(forecast: Forecast, grid: Grid, goal: Goal | None = None) -> None:
+    """Refuse a bbox that lies wholly outside the forecast's longitude/latitude range, or a goal outside it
+    (it would read as land: no current there).
 
     Longitudes compare modulo 360 deg, as resampling reads them (``planner.forecast.resample``): a
     box in -180..180 covers a file on 0..360 (HYCOM's regional files) where it does after a whole turn.
     """
+    if goal is not None and _in_grid(grid, goal) and \
+            not _covered(forecast, np.array([goal.lon_deg]), np.array([goal.lat_deg]))[0]:
+        lon, lat = forecast.lon_deg, forecast.lat_deg
+        raise GoalError(f"goal ({goal.lon_deg:g}, {goal.lat_deg:g}) lies outside the forecast {forecast.source}, which "
+                        f"covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, lat {np.nanmin(lat):.4f}.."
+                        f"{np.nanmax(lat):.4f}")
     lon, lat = forecast.lon_deg, forecast.lat_deg
     b = grid.bbox
     lon_lo, lon_hi = float(np.nanmin(lon)), float(np.nanmax(lon))
@@ -179,6 +188,31 @@ def check_coverage(forecast: Forecast, grid: Grid) -> None:
             f"{forecast.source}, which covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, "
             f"lat {np.nanmin(lat):.4f}..{np.nanmax(lat):.4f}"
         )
+
+
+def coverage_fraction(forecast: Forecast, grid: Grid) -> float:
+    """The fraction of the grid's cells whose centres lie within the forecast's longitude/latitude range:
+    the others have no current and are land to the plan."""
+    lon_ok = _covered(forecast, grid.lon_deg, np.full(grid.nx, float(np.nanmin(forecast.lat_deg))))
+    lat_ok = _covered(forecast, np.full(grid.ny, float(np.nanmin(forecast.lon_deg))), grid.lat_deg)
+    return float(lon_ok.mean() * lat_ok.mean())
+
+
+def _in_grid(grid: Grid, goal: Goal) -> bool:
+    """Whether ``goal`` lies in one of the grid's cells (one outside it is refused with its own hint, later)."""
+    b = grid.bbox
+    return (b.west_deg - grid.dlon_deg / 2 <= goal.lon_deg <= b.east_deg + grid.dlon_deg / 2
+            and b.south_deg - grid.dlat_deg / 2 <= goal.lat_deg <= b.north_deg + grid.dlat_deg / 2)
+
+
+def _covered(forecast: Forecast, lon_deg: NDArray[np.float64], lat_deg: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Points within the forecast's longitude (modulo 360 deg; all of them on a periodic axis) and latitude ranges."""
+    lon, lat = forecast.lon_deg, forecast.lat_deg
+    tol = 1e-9
+    lo, hi = float(np.nanmin(lon)), float(np.nanmax(lon))
+    lon_ok = np.ones(lon_deg.shape, dtype=bool) if lon.ndim == 1 and is_periodic_lon(lon) else \
+        np.mod(lon_deg - lo + tol, 360.0) <= hi - lo + 2 * tol
+    return lon_ok & (lat_deg >= np.nanmin(lat) - tol) & (lat_deg <= np.nanmax(lat) + tol)
 
 
 def choose_time_index(forecast: Forecast | ForecastTimes, request: PlanRequest) -> int:
@@ -274,7 +308,7 @@ def member_tasks(request: PlanRequest, *, first: Forecast | None = None) -> list
     else:
         index = choose_time_index(first, request)
     grid = planning_grid(first, request)
-    check_coverage(first, grid)
+    check_coverage(first, grid, request.goal)
     refine = refine_factor(grid, native_spacing_deg(first))
     u, v = resample(first, grid, time_index=first.step_index(index))
     goal_mask = _goal_mask(grid, u, v, request.goal, first.source)
@@ -328,7 +362,7 @@ def make_plan(request: PlanRequest, *, forecast: Forecast | None = None, progres
     step = forecast.step_index(index)  # index into forecast.time_s: 0 for a one-step window
     timings["load_s"] = time.perf_counter() - t
     grid = planning_grid(forecast, request)
-    check_coverage(forecast, grid)
+    check_coverage(forecast, grid, request.goal)
     _note(progress, f"grid {grid.nx} x {grid.ny} x {grid.n_layers} layers x 8 headings = {grid.n_states:,} states")
     model: TransitionModel | PhysicalModel
     solution: Solution | PhysicalSolution
@@ -430,7 +464,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     steps = slice_steps(forecast, index, request.settings.horizon_h, request.settings.slice_h)
     timings["load_s"] = time.perf_counter() - t
     grid = planning_grid(forecast, request)
-    check_coverage(forecast, grid)
+    check_coverage(forecast, grid, request.goal)
     request, error = _with_error(request, forecast, grid, index, progress, members)
     settings = request.settings
     refine = refine_factor(grid, native_spacing_deg(forecast))

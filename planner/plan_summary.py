@@ -28,6 +28,12 @@ def summary_lines(result: PlanResult, *, out: Path, size: int) -> list[str]:
     ]
     lines.extend(model_lines(result))
     lines.append(f"reachable  {reachable:,} of {water_states:,} water states ({reachable / max(water_states, 1):.1%})")
+    from planner.pipeline import coverage_fraction  # loaded already: it made the result
+
+    covered = coverage_fraction(result.forecast, result.grid)
+    if covered < 1.0:
+        lines.append(f"warning    the forecast covers {covered:.1%} of the region's cells; the rest have no current and "
+                     "are planned as land: give a region within the forecast (lrauv forecast info)")
     if result.model.settings.model == "physical" and reachable < 0.5 * water_states:
         error = result.model.settings.physical.current_error_m_s
         lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g} m/s"
@@ -75,8 +81,8 @@ def time_line(result: PlanResult, total_s: float) -> str:
     """How long each stage took, and ``total_s`` in all."""
     t = result.timings_s
     stages = f"load {t['load_s']:.2f} s, resample {t['resample_s']:.2f} s, plan {t['plan_s']:.3f} s"
-    if "transitions_s" in t:  # the physical model's plan time: sampling the transitions, then solving
-        sampling = f"sampling {t['sampling_s']:.2f} s, " if "sampling_s" in t else ""
-        stages += (f" ({sampling}transitions {t['transitions_s']:.2f} s,"
+    if "transitions_s" in t:  # the physical model's plan time: the transitions (sampling them, then assembling), the solve
+        sampling = f", of which sampling {t['sampling_s']:.2f} s" if "sampling_s" in t else ""
+        stages += (f" (transitions {t['transitions_s']:.2f} s{sampling};"
                    f" solve {t['plan_s'] - t['transitions_s']:.3f} s)")
     return f"time       {stages}, total {total_s:.2f} s"

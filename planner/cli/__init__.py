@@ -11,6 +11,7 @@ Bad input prints one line ``lrauv: error: ...`` to stderr and exits with status 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ from planner.contract.arguments import CommandParser
 from planner.contract.errors import LrauvError
 
 EXIT_BAD_INPUT = 2
+EXIT_BROKEN_PIPE = 128 + 13  # as a shell reports a process that SIGPIPE ended (Python ignores the signal)
 
 
 @dataclass(frozen=True, slots=True)
@@ -60,6 +62,7 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """
     parser = CommandParser(prog="lrauv", description="Feedback motion planning and onboard execution for long-range AUVs.",
                            formatter_class=UserHelp)
+    parser.add_argument("--version", action=_Version, nargs=0, help="print the installed version and exit")
     sub = parser.add_subparsers(dest="command", required=True)
     wanted = None if command is None else COMMANDS[command].module
     for c in TABLE:
@@ -78,7 +81,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser(_command_in(argv)).parse_args(argv)
     try:
-        return _module(args.command).run(args)
+        status = _module(args.command).run(args)
+        sys.stdout.flush()  # here, where a reader that went away is caught (below), not at the interpreter's exit
+        return status
+    except BrokenPipeError:  # stdout's reader stopped reading (`| head`): not bad input; the work is done
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's own flush must not fail again
+        return EXIT_BROKEN_PIPE
     except LrauvError as exc:
         print(f"lrauv: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -86,13 +94,32 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = exc.filename or "file"
         print(f"lrauv: error: {where}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except MemoryError as exc:  # a grid, region or forecast too large for this machine
+        print(f"lrauv: error: not enough memory: {exc or 'an allocation failed'}; a smaller grid, region or time span?",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("lrauv: interrupted", file=sys.stderr)
         return 130
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed distribution's version (pyproject.toml), looked up only when asked for."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            text = version("lrauv-feedback")
+        except PackageNotFoundError:
+            text = "unknown (not installed)"
+        print(f"lrauv {text}")
+        parser.exit()
+
+
 def _command_in(argv: Sequence[str]) -> str | None:
-    """The subcommand named in ``argv``: its first word that is not an option (``lrauv`` has only ``-h``)."""
+    """The subcommand named in ``argv``: its first word that is not an option (``lrauv`` has only ``-h`` and ``--version``)."""
     word = next((a for a in argv if not a.startswith("-")), None)
     return word if word in COMMANDS else None
 

@@ -28,9 +28,12 @@ def add_parser(sub: Subcommands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.cli import EXIT_BAD_INPUT
     from planner.cli.progress_bar import announcer, bars
-    from planner.shore.demo import draw_track, run_closed_loop
+    from planner.shore.demo import check_inputs, draw_track, run_closed_loop
 
+    check_inputs(table=args.table, mission=args.mission, truth=args.truth, timeout_s=args.timeout_s,
+                 speedup=args.speedup)
     args.out.mkdir(parents=True, exist_ok=True)
     with bars(quiet=args.quiet) as meter:
         announcer(meter, quiet=args.quiet)(f"closed loop: simulator and executive at {args.speedup:g}x, up to"
@@ -40,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
             heading_deg=args.heading_deg, speedup=args.speedup, out=args.out, timeout_s=args.timeout_s,
             seed=args.seed, meter=meter,
         )
+    if result.exec_status == EXIT_BAD_INPUT:  # the executive refused its input: its error, and no pictures of no run
+        sys.stderr.write(result.exec_output)
+        return result.exec_status
     sys.stdout.write(result.exec_output)
     picture = draw_track(args.table, result.track_csv, args.out / "pictures" / "track.png", truth=args.truth)
     say(f"track      {result.track_csv}")

@@ -122,7 +122,9 @@ def format_table(summaries: list[MethodSummary]) -> str:
                      f" {o['left_region']:>5} {o['timed_out']:>7} {o['gave_up']:>7} {o['refused']:>7}")
     figures = (f"{'method':<18} {'success':>8} {'of marked':>9} {'coverage':>8} {'time h':>7} {'energy Wh':>9}"
                f" {'pred Wh':>8} {'pred err':>8} {'vs naive':>8}")
-    lines += ["", "figures (time, energy, predicted: medians of arrived runs; pred err: spent / predicted - 1)",
+    lines += ["", "figures (success: arrived of all runs; of marked: arrived of the runs from starts the plan marks "
+                  "reachable; coverage: of the starts some method arrived from, those it marks; time, energy, "
+                  "predicted: medians of arrived runs; pred err: spent / predicted - 1)",
               figures, "-" * len(figures)]
     for s in summaries:
         lines.append(

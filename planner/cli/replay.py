@@ -77,6 +77,8 @@ def _replay(args: argparse.Namespace) -> int:
         raise LrauvError(f"--speed: expected a positive factor; got {args.speed}")
     if not (math.isfinite(args.simplify_m) and args.simplify_m >= 0):
         raise LrauvError(f"--simplify-m: expected metres >= 0; got {args.simplify_m}")
+    if args.forecast is not None and not args.forecast.is_file():  # given: it must be there, not looked for
+        raise LrauvError(f"--forecast {args.forecast}: no such file")
     t0 = time.perf_counter()
     with bars(quiet=args.quiet) as meter:  # closed before the summary prints on stdout
         log = open_dive(args.log, meter=meter)

@@ -272,7 +272,8 @@ class YamlSection:
     def raw(self, name: str, default: Any = None) -> Any:
         return self.value.get(name, default)
 
-    def number(self, name: str, default: float | None = None, *, minimum: float | None = None, unit: str = "") -> float:
+    def number(self, name: str, default: float | None = None, *, minimum: float | None = None,
+               maximum: float | None = None, unit: str = "") -> float:
         if name not in self.value or self.value[name] is None:
             if default is None:
                 raise self.doc.error(self.path(name), f"required; expected a number{(' in ' + unit) if unit else ''}")
@@ -282,6 +283,8 @@ class YamlSection:
             raise self.doc.error(self.path(name), f"expected a number{(' in ' + unit) if unit else ''}; got {v!r}")
         if minimum is not None and v < minimum:
             raise self.doc.error(self.path(name), f"expected at least {minimum:g}{(' ' + unit) if unit else ''}; got {v!r}")
+        if maximum is not None and v > maximum:
+            raise self.doc.error(self.path(name), f"expected at most {maximum:g}{(' ' + unit) if unit else ''}; got {v!r}")
         return float(v)
 
     def integer(self, name: str, default: int | None = None, *, minimum: int | None = None) -> int:
@@ -334,7 +337,9 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         text = p.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise MissionError(f"{p}: no such mission file") from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        raise MissionError(f"{p}: not a text file (byte {exc.start} is not UTF-8): expected a mission in YAML") from None
+    except OSError as exc:
         raise MissionError(f"{p}: cannot read: {exc}") from None
     doc = YamlDocument(p, text)
     top = YamlSection(doc, doc.root, "", {"name", "forecast", "region", "vehicle", "planning", "goals", "replanning", "safety",
@@ -481,7 +486,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         fence = tuple((float(a), float(b)) for a, b in fence_raw)
     safety = Safety(
         max_mission_time_s=sf.number("max_mission_time_h", 7 * 24.0, minimum=0.01, unit="h") * 3600.0,
-        min_battery_pct=sf.number("min_battery_pct", 10.0, minimum=0, unit="%"),
+        min_battery_pct=sf.number("min_battery_pct", 10.0, minimum=0, maximum=100, unit="%"),
         max_depth_m=sf.number("max_depth_m", 50.0, minimum=0, unit="m"),
         geofence=fence,
         link_loss_timeout_s=sf.number("link_loss_timeout_s", 30.0, minimum=0.1, unit="s"),

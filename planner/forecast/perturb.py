@@ -64,6 +64,12 @@ def write_perturbed(source: str | os.PathLike[str], out: str | os.PathLike[str],
     if phase_error_h != 0.0 and times.time_s.size < 2:
         raise ForecastError(f"{label}: a phase error needs two or more time steps to move the currents between; "
                             "the file has one (an amplitude error alone works)")
+    span_h = float(times.time_s[-1] - times.time_s[0]) / 3600.0
+    if abs(phase_error_h) >= span_h > 0.0:
+        raise ForecastError(f"phase_error_h: {phase_error_h:g} h moves every step of {label} past its first or last "
+                            f"(the file spans {span_h:g} h); expected less than that")
+    if Path(out).exists() and Path(out).resolve() == Path(source).resolve():
+        raise ForecastError(f"{out}: the copy would replace the file it is made from; give another output file")
     ds, label, _path = open_dataset(source, "forecast file")
     try:
         with warnings.catch_warnings():

@@ -38,6 +38,30 @@ class DemoResult:
     layout_path: Path | None = None  # the Foxglove layout written beside the log
 
 
+def check_inputs(*, table: Path, mission: Path | None, truth: Path, timeout_s: float, speedup: float) -> None:
+    """What the executive would refuse, refused here before a process starts or a file of an earlier run in
+    the output folder is replaced: the table, the mission, the table's goal among the mission's, the limits."""
+    import math
+
+    from executive.goal_tables import goal_matches
+    from planner.contract.errors import ShoreError
+    from planner.contract.mission import load_mission
+
+    if not (math.isfinite(timeout_s) and timeout_s > 0):
+        raise ShoreError(f"--timeout-s: expected seconds of wall time > 0; got {timeout_s:g}")
+    if not (math.isfinite(speedup) and speedup > 0):
+        raise ShoreError(f"--speedup: expected a factor > 0; got {speedup:g}")
+    if not truth.is_file():
+        raise ShoreError(f"--truth {truth}: no such file")
+    loaded = PolicyTable.load(table)
+    if mission is not None:
+        goals = load_mission(mission).goals
+        if not any(goal_matches(loaded, g.goal) for g in goals):
+            raise ShoreError(f"{table}: its goal ({loaded.goal_lon_deg:.6f}, {loaded.goal_lat_deg:.6f}, "
+                             f"{loaded.goal_depth_m:g} m, radius {loaded.goal_radius_cells}) matches no goal of "
+                             f"{mission}: plan the table for this mission")
+
+
 def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: str, depth_m: float, heading_deg: float,
                     speedup: float, out: Path, timeout_s: float, seed: int = 0, meter: Progress = SILENT) -> DemoResult:
     """Run sim and exec as processes until the executive exits; returns its status and output.

@@ -7,8 +7,12 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from tests.support import REPO
+
+if TYPE_CHECKING:
+    import pytest
 
 DEMO_MISSION = REPO / "missions" / "demo.yaml"
 
@@ -61,3 +65,15 @@ def assert_audit_clean(path: Path) -> None:
     result = audit_log(path)
     assert result.decisions > 0, f"{path}: no decision to audit"
     assert result.clean, "\n".join(m.describe() for m in result.mismatches[:10])
+
+
+def error_line(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    """The one ``lrauv: error:`` line of a ``planner.cli.main`` run that must exit 2 without a traceback."""
+    from planner.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.startswith("lrauv: error:")]
+    assert len(lines) == 1, err
+    return lines[0]

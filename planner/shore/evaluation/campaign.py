@@ -70,6 +70,9 @@ class CampaignSpec:
             raise ShoreError(f"--dt-s: expected a step in seconds > 0; got {self.dt_s!r}")
         if not (math.isfinite(self.max_time_s) and self.max_time_s > 0):
             raise ShoreError(f"--max-hours: expected hours > 0; got {self.max_time_s / 3600.0!r}")
+        if self.dt_s >= self.max_time_s:
+            raise ShoreError(f"--dt-s: a step of {self.dt_s:g} s is not shorter than a run ({self.max_time_s / 3600.0:g} h, "
+                             "--max-hours); expected a physics step of seconds (default 2)")
         if self.seed < 0:
             raise ShoreError(f"--seed: expected an integer >= 0; got {self.seed}")
         if self.replan_s is not None and not (math.isfinite(self.replan_s) and self.replan_s > 0):

@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.contract.actions import Action
+from planner.contract.errors import ShoreError
 from planner.contract.steering import SteeringKind, is_complete, steer
 from planner.contract.table import CELL_MARGIN, PolicyTable
 from vehicle_sim.dynamics import Body, Setpoint, SetpointKind, step
@@ -250,7 +251,8 @@ def pick_starts(referee: Referee, truth: Truth, n: int, *, seed: int, time_offse
     while len(out) < n:
         tries += 1
         if tries > 1000 * max(n, 1):
-            raise ValueError(f"found only {len(out)} of {n} start states in water after {tries - 1} tries")
+            raise ShoreError(f"found only {len(out)} of {n} start states in water after {tries - 1} tries: a start "
+                             "needs water in the plan's table and in the truth; does the truth cover the mission's region?")
         lon = table.lon0_deg + (rng.uniform(-0.5, table.nx - 0.5)) * table.dlon_deg
         lat = table.lat0_deg + (rng.uniform(-0.5, table.ny - 0.5)) * table.dlat_deg
         depth = float(table.depth_m[int(rng.integers(table.n_layers))])

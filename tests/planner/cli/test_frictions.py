@@ -9,18 +9,9 @@ import pytest
 
 from planner.cli import main
 from tests.support import REPO
+from tests.support.helpers import error_line
 
 GRID = ["--bbox=-118.26,33.30,-117.70,33.70", "--nx=29", "--ny=21", "--depths=0,5,10,15"]
-
-
-def error_line(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
-    """The one error line of a run that must exit 2 without a traceback."""
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = [line for line in err.splitlines() if line.startswith("lrauv: error:")]
-    assert len(lines) == 1, err
-    return lines[0]
 
 
 def test_a_swapped_goal_gets_a_hint(synthetic_forecast, tmp_path, capsys):

@@ -45,6 +45,7 @@ def line_of(path: Path, needle: str) -> int:
         ("on_breach: surface", "on_breach: explode", "safety.on_breach", "expected one of surface, drift, hold"),
         ("cruise_speed_m_s: 1.0", "cruise_speed_m_s: fast", "vehicle.cruise_speed_m_s", "expected a number"),
         ("bbox: [-118.26, 33.30, -117.70, 33.70]", "bbox: [-117.70, 33.30, -118.26, 33.70]", "region.bbox", "WEST < EAST"),
+        ("min_battery_pct: 10", "min_battery_pct: 150", "safety.min_battery_pct", "expected at most 100 %; got 150"),
     ],
 )
 def test_errors_name_file_line_and_key(tmp_path, old, new, key, message):

@@ -453,7 +453,7 @@ def test_a_control_character_is_one_line_naming_its_line(capsys, mission_text, t
 def test_a_mission_that_is_not_utf8(capsys, tmp_path):
     path = tmp_path / "mission.yaml"
     path.write_bytes(b"name: \xff\xfe\n")
-    assert_refused(lrauv(capsys, "plan", path, "--out", tmp_path / "t.lrpt"), f"{path}: cannot read", "utf-8")
+    assert_refused(lrauv(capsys, "plan", path, "--out", tmp_path / "t.lrpt"), f"{path}: not a text file (byte 6 is not UTF-8)", "expected a mission in YAML")
 
 
 def _billion_laughs() -> str:
