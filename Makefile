@@ -13,6 +13,8 @@ HAVE_NODE  := $(shell command -v node >/dev/null 2>&1 && command -v npm >/dev/nu
 # Where the demo vehicle starts (LON,LAT): open water 16 km west-south-west of the goal.
 DEMO_START ?= -117.96,33.34
 DEMO_SPEEDUP ?= 1000
+# Wall-time limit of the demo's dive (s): a start far from the goal needs longer.
+DEMO_TIMEOUT_S ?= 170
 # Start states of the closed-loop comparison at the end of `make demo` (docs/evaluation.md uses 200).
 EVAL_STARTS ?= 40
 
@@ -45,7 +47,7 @@ demo: $(STAMP) bytecode
 	$(LRAUV) plan missions/demo.yaml --forecast $(OUT)/forecast.nc --out $(OUT)/demo.lrpt \
 	  --export-values $(OUT)/values.nc --plot $(OUT)/pictures --start $(DEMO_START),0,0
 	$(LRAUV) demo --mission missions/demo.yaml --table $(OUT)/demo.lrpt --truth $(OUT)/truth.nc \
-	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --out $(OUT)
+	  --start $(DEMO_START) --speedup $(DEMO_SPEEDUP) --timeout-s $(DEMO_TIMEOUT_S) --out $(OUT)
 	$(LRAUV) replay $(OUT)/demo.mcap --report $(OUT)/report \
 	  --csv $(OUT)/dive.csv --geojson $(OUT)/dive.geojson --gpx $(OUT)/dive.gpx
 	$(LRAUV) plan missions/demo-physical.yaml --forecast $(OUT)/forecast.nc --out $(OUT)/demo-physical.lrpt \
