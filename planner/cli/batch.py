@@ -23,8 +23,10 @@ def add_parser(sub: Subcommands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from planner.contract.atomic import check_folder_target
     from planner.shore.batch import run_batch
 
+    check_folder_target(args.out)  # before the plans, not after them
     note = None if args.quiet else (lambda text: print(f"  {text}", file=sys.stderr, flush=True))
     done = run_batch(args.files, out_dir=args.out, forecast=args.forecast, scheduler=args.scheduler,
                      workers=args.workers, note=note)

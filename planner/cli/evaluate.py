@@ -53,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from planner.cluster import open_runner
+    from planner.contract.atomic import check_folder_target
     from planner.contract.mission import load_mission
     from planner.pipeline import mission_forecast
     from planner.shore.evaluation.campaign import (
@@ -64,6 +65,8 @@ def run(args: argparse.Namespace) -> int:
     from vehicle_sim.world import WorldError, load_truth
 
     mission = load_mission(args.mission)
+    if args.out is not None:
+        check_folder_target(args.out)  # before the runs' minutes, not after them
     if args.cruise_speed is not None:
         vehicle = mission.settings.vehicle
         if not (math.isfinite(args.cruise_speed) and args.cruise_speed > 0):

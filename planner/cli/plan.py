@@ -90,7 +90,7 @@ def add_parser(sub: Subcommands) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from planner.contract.atomic import write_atomic
+    from planner.contract.atomic import check_file_target, write_atomic
     from planner.contract.mission import load_mission
     from planner.cli.progress_bar import bars
     from planner.pipeline import plan_with_scheduler
@@ -100,11 +100,13 @@ def run(args: argparse.Namespace) -> int:
     progress = not args.quiet
     if args.export_values:
         check_suffix(args.export_values)  # before the plan's minutes, not after
+        check_file_target(args.export_values)
     mission = None if args.mission is None else load_mission(args.mission)
     request = plan_request(args, mission)
     if args.plot:
         check_plot_options(args, len(request.depths_m))
     out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
+    check_file_target(out)
     t0 = time.perf_counter()
     settings = request.settings
     if progress:

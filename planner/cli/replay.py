@@ -67,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _replay(args: argparse.Namespace) -> int:
     from executive.recorder import LogError
+    from planner.contract.atomic import check_file_target, check_folder_target
     from planner.shore.replay.audit import audit, logged_tables, summary_line
     from planner.shore.replay.dive import load_dive
     from planner.shore.replay.divelog import open_dive
@@ -77,6 +78,11 @@ def _replay(args: argparse.Namespace) -> int:
         raise LrauvError(f"--speed: expected a positive factor; got {args.speed}")
     if not (math.isfinite(args.simplify_m) and args.simplify_m >= 0):
         raise LrauvError(f"--simplify-m: expected metres >= 0; got {args.simplify_m}")
+    for path in (args.csv, args.geojson, args.gpx, args.tlog, args.layout):  # before the work, not after it
+        if path is not None:
+            check_file_target(path)
+    if args.report is not None:
+        check_folder_target(args.report)
     if args.forecast is not None and not args.forecast.is_file():  # given: it must be there, not looked for
         raise LrauvError(f"--forecast {args.forecast}: no such file")
     t0 = time.perf_counter()

@@ -14,6 +14,29 @@ from contextlib import contextmanager
 from pathlib import Path
 
 
+def check_file_target(path: str | os.PathLike[str]) -> None:
+    """Raise now what writing a file at ``path`` later would: a folder there, or a file where a folder of its path
+    should be. A command checks its outputs before its work, not after."""
+    if not str(path):
+        raise FileNotFoundError(errno.ENOENT, "expected a file name; got an empty one", "''")
+    if Path(path).is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a folder: expected a file name", str(path))
+    _check_parents(Path(path).parent)
+
+
+def check_folder_target(path: str | os.PathLike[str]) -> None:
+    """Raise now what writing files into the folder ``path`` later would: a file there or in its path."""
+    _check_parents(Path(path))
+
+
+def _check_parents(folder: Path) -> None:
+    for part in (folder, *folder.parents):
+        if part.exists():
+            if not part.is_dir():
+                raise NotADirectoryError(errno.ENOTDIR, "is a file: expected a folder", str(part))
+            return
+
+
 @contextmanager
 def atomic_target(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a temporary path to write; on success it replaces ``path`` (mode 0644).

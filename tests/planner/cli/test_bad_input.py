@@ -213,3 +213,22 @@ def test_a_physics_step_as_long_as_the_run_is_refused(synthetic_forecast, tmp_pa
                                str(synthetic_forecast), "--methods", "paper", "--starts", "2", "--max-hours", "1",
                                "--dt-s", "100000", "--out", str(tmp_path / "e")])
     assert "--dt-s: a step of 100000 s is not shorter than a run (1 h, --max-hours)" in line, line
+
+
+@pytest.mark.parametrize("command", ["evaluate", "replay"])
+def test_an_output_folder_that_is_a_file_is_refused_before_the_work(synthetic_forecast, tmp_path, capsys, command):
+    taken = tmp_path / "taken"
+    taken.write_bytes(b"kept")
+    argv = (["evaluate", DEMO, "--forecast", str(synthetic_forecast), "--truth", str(synthetic_forecast),
+             "--methods", "paper", "--starts", "2", "--max-hours", "1", "--out", str(taken / "e")]
+            if command == "evaluate" else ["replay", str(tmp_path / "dive.mcap"), "--report", str(taken)])
+    line = error_line(capsys, argv)
+    assert line == f"lrauv: error: {taken}: is a file: expected a folder", line
+    assert taken.read_bytes() == b"kept"
+
+
+def test_a_replay_export_path_that_is_a_folder_is_refused_before_the_work(tmp_path, capsys):
+    line = error_line(capsys, ["replay", str(tmp_path / "dive.mcap"), "--csv", str(tmp_path / "new.csv"),
+                               "--gpx", str(tmp_path)])
+    assert line == f"lrauv: error: {tmp_path}: is a folder: expected a file name", line
+    assert not (tmp_path / "new.csv").exists()
