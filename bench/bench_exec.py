@@ -67,6 +67,11 @@ def bench_latency(table_path: Path, work: Path, n: int) -> dict[str, float]:
         return msg.pack(ap)
 
     hb = frame(ap.heartbeat_encode(12, 3, 1 | 128, int(SubMode.GUIDED), 4))
+    # The EKF vouches for an absolute position: the executive arms and follows the policy only then
+    # (ArduSub's EKF_STATUS_REPORT, flag EKF_POS_HORIZ_ABS).
+    ekf_flags = (bridge.mavlink.EKF_ATTITUDE | bridge.mavlink.EKF_VELOCITY_HORIZ | bridge.mavlink.EKF_POS_HORIZ_REL
+                 | bridge.mavlink.EKF_POS_HORIZ_ABS | bridge.mavlink.EKF_POS_VERT_ABS)
+    ekf = frame(ap.ekf_status_report_encode(ekf_flags, 0.1, 0.1, 0.1, 0.1, 0.1))
     # A straight run across the grid at 1 m/s, heading east, 10 Hz, alternating position and attitude.
     lat = table.lat0_deg + 0.5 * table.ny * table.dlat_deg
     frames = []
@@ -82,7 +87,7 @@ def bench_latency(table_path: Path, work: Path, n: int) -> dict[str, float]:
             frames.append(frame(ap.attitude_encode(t_ms, 0.0, 0.0, 1.5708, 0.0, 0.0, 0.0)))
     ex._heartbeat(time.monotonic())  # binds the executive's socket
     ex_addr = ("127.0.0.1", ex.conn.port.getsockname()[1])
-    for data in [hb] * 3 + frames:
+    for data in [hb] * 3 + [ekf] + frames:
         sink.sendto(data, ex_addr)  # a real datagram through the loopback, as the autopilot sends it
         ex._drain(time.monotonic())
         if ex._counts["in"] % 2000 == 0:
