@@ -42,10 +42,19 @@ def import_waypoints(wpl_path: Path, base_path: Path, out: Path) -> tuple[Path, 
         raise WaypointError(f"{wpl_path}: {exc}", exc.result) from None
     base = load_mission(base_path)
     deepest = base.region.depths_m[-1]
+    box, nx, ny = base.region.bbox, base.region.nx, base.region.ny
     for n, mg in enumerate(goals, start=1):
         if mg.goal.depth_m > deepest + 1e-9:
             raise WaypointError(f"{wpl_path}: item {n}: depth {mg.goal.depth_m:g} m is deeper than the deepest layer "
                                 f"{deepest:g} m of {base_path}")
+        if box is not None and nx and ny:  # cell centres lie on the box's edges: its cells reach half a cell beyond
+            half_lon, half_lat = (box.east_deg - box.west_deg) / (nx - 1) / 2, (box.north_deg - box.south_deg) / (ny - 1) / 2
+            g = mg.goal
+            if not (box.west_deg - half_lon <= g.lon_deg <= box.east_deg + half_lon
+                    and box.south_deg - half_lat <= g.lat_deg <= box.north_deg + half_lat):
+                raise WaypointError(f"{wpl_path}: item {n}: ({g.lon_deg:g}, {g.lat_deg:g}) lies outside the region "
+                                    f"{box.west_deg:g},{box.south_deg:g},{box.east_deg:g},{box.north_deg:g} of "
+                                    f"{base_path}: no plan could reach it")
     text = replace_goals(base_path.read_text(encoding="utf-8"), goals, base_dir=base_path.parent, out_dir=out.parent)
     with atomic_target(out) as tmp:
         tmp.write_text(text, encoding="utf-8")

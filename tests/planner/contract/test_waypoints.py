@@ -308,6 +308,11 @@ def test_import_errors_raise_planner_errors_naming_the_file(tmp_path):
     deep = write_wpl(tmp_path / "deep.waypoints", goals_to_items((goal(33.4, -117.8, 40.0),), **HOME))
     with pytest.raises(WaypointError, match="deep.waypoints: item 1: depth 40 m is deeper than the deepest layer 15 m"):
         _cli(["waypoints", "import", str(deep), "--mission", str(base), "--out", str(out)])
+    far = write_wpl(tmp_path / "far.waypoints", goals_to_items((goal(40.0, -117.8, 0.0),), **HOME))
+    with pytest.raises(WaypointError, match=r"far.waypoints: item 1: \(-117.8, 40\) lies outside the region "
+                                            r"-118.26,33.3,-117.7,33.7 of .*: no plan could reach it"):
+        _cli(["waypoints", "import", str(far), "--mission", str(base), "--out", str(out)])
+    assert not out.exists()
     bad = tmp_path / "bad.waypoints"
     bad.write_text("QGC WPL 110\n0 1 0\n")
     with pytest.raises(LrauvError, match=r"bad.waypoints:2: 3 columns"):
