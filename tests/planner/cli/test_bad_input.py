@@ -4,6 +4,7 @@ and before an earlier output is replaced. Through ``planner.cli.main`` as a user
 from __future__ import annotations
 
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -232,3 +233,15 @@ def test_a_replay_export_path_that_is_a_folder_is_refused_before_the_work(tmp_pa
                                "--gpx", str(tmp_path)])
     assert line == f"lrauv: error: {tmp_path}: is a folder: expected a file name", line
     assert not (tmp_path / "new.csv").exists()
+
+
+def test_a_forecast_too_large_for_memory_is_one_line(tmp_path):
+    """A real allocation that fails: under a 4 GiB address-space limit (the shell's ulimit) it fails at once."""
+    command = shlex.join([sys.executable, "-m", "planner.cli", "forecast", "synth", str(tmp_path / "huge.nc"),
+                          "--hours", "100000000"])
+    proc = subprocess.run(["sh", "-c", f"ulimit -v 4194304 && exec {command}"], capture_output=True, text=True,
+                          cwd=REPO, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert "lrauv: error: not enough memory: Unable to allocate" in proc.stderr, proc.stderr
+    assert not (tmp_path / "huge.nc").exists()
