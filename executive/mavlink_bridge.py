@@ -78,8 +78,8 @@ def open_link(address: str, *, source_system: int, source_component: int,
     from pymavlink import mavutil
 
     kind, _, rest = address.partition(":")
-    if kind in ("udpin", "udp", "udpout", "tcp", "tcpin"):
-        _check_host_port(address, kind, rest, flag)
+    if kind in _NETWORK_KINDS:
+        check_address(address, flag=flag)
         try:
             if kind in ("udpin", "udp", "udpout"):
                 conn: Any = _udp_link_class()(rest, listen=kind != "udpout", source_system=source_system,
@@ -109,14 +109,23 @@ def open_link(address: str, *, source_system: int, source_component: int,
     return conn
 
 
-def _check_host_port(address: str, kind: str, rest: str, flag: str) -> None:
-    """``rest`` of a network address is HOST:PORT with a port 0..65535 and, where the host is written as
-    numbers, an IPv4 address: pymavlink would fail on it with a traceback, or send to nowhere."""
+_NETWORK_KINDS = ("udpin", "udp", "udpout", "tcp", "tcpin")
+
+
+def check_address(address: str, *, flag: str = "--link") -> None:
+    """A network address's HOST:PORT: a port 0..65535 and, where the host is written as numbers, an IPv4
+    address (pymavlink would fail on it with a traceback, or send to nowhere). A serial device is only
+    known when it is opened. ``flag`` names the option in the error; checked before any work."""
+    kind, _, rest = address.partition(":")
+    if kind not in _NETWORK_KINDS:
+        return
     host, sep, port = rest.rpartition(":")
-    numeric = host.replace(".", "").isdigit()
-    if not sep or not host or not port.isdigit() or int(port) > 65535 or (numeric and not _is_ipv4(host)):
+    listens = kind in ("udpin", "udp", "tcpin")  # an empty host listens on every interface (udpin::14550)
+    if not sep or (not host and not listens) or not port.isdigit() or int(port) > 65535:
         raise ExecutiveError(f"{flag} {address!r}: expected {kind}:HOST:PORT, a port 0..65535 "
                              f"(e.g. {kind}:127.0.0.1:14550)")
+    if host.replace(".", "").isdigit() and not _is_ipv4(host):
+        raise ExecutiveError(f"{flag} {address!r}: the host {host} is not an IPv4 address (four numbers 0..255)")
 
 
 def _is_ipv4(host: str) -> bool:

@@ -10,7 +10,6 @@ from numpy.typing import NDArray
 from planner.contract.errors import GridError
 from planner.contract.geodesy import BBox
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m
-from planner.contract.table import MAX_STATES
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -43,10 +42,6 @@ class Grid:
         """Cell centres on the box edges: ``linspace(west, east, nx)`` (spec section 1)."""
         if int(nx) < 2 or int(ny) < 2:
             raise GridError(f"grid: expected nx >= 2 and ny >= 2; got nx={nx}, ny={ny}")
-        n_states = len(depths_m) * int(ny) * int(nx) * N_HEADINGS
-        if n_states >= MAX_STATES:  # refused before the currents are resampled onto it
-            raise GridError(f"grid: {len(depths_m)} layers x {ny} x {nx} cells x {N_HEADINGS} headings = {n_states:,} "
-                            f"states; a plan holds at most {MAX_STATES - 1:,}")
         return cls(
             lon_deg=np.linspace(bbox.west_deg, bbox.east_deg, int(nx)),
             lat_deg=np.linspace(bbox.south_deg, bbox.north_deg, int(ny)),

@@ -28,7 +28,7 @@ from planner.forecast import (
 )
 from planner.forecast.ensemble import ensemble_mean
 from planner.forecast.error import ErrorEstimate, measure_error
-from planner.forecast.resample import resample
+from planner.forecast.resample import axis_snap_tol, resample
 from planner.grid import Grid
 from planner.contract.columns import fit
 from planner.contract.geodesy import BBox
@@ -37,7 +37,8 @@ from planner.contract.progress import SILENT, Progress
 from planner.contract.settings import Goal, PlanSettings
 from planner.paper.solve import ENTRY_KERNEL as SEARCH_KERNEL
 from planner.paper.solve import Solution, goal_cells_on, solve
-from planner.contract.table import PolicyTable
+from planner.contract.headings import N_HEADINGS
+from planner.contract.table import MAX_STATES, PolicyTable
 from planner.paper.transitions import TransitionModel, build_transitions
 from planner.physical.model import (
     PhysicalModel,
@@ -134,6 +135,7 @@ def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
     if request.bbox is not None:
         if request.nx is None or request.ny is None:
             raise GridError("grid: a bbox needs --nx and --ny")
+        _check_states(request.nx, request.ny, len(request.depths_m))
         return Grid.from_bbox(vehicle_longitudes(request.bbox), nx=request.nx, ny=request.ny,
                               depths_m=list(request.depths_m))
     lon, lat = forecast.lon_deg, forecast.lat_deg
@@ -143,10 +145,18 @@ def planning_grid(forecast: Forecast, request: PlanRequest) -> Grid:
         )
     bbox = vehicle_longitudes(
         BBox(west_deg=float(lon[0]), south_deg=float(lat[0]), east_deg=float(lon[-1]), north_deg=float(lat[-1])))
-    return Grid.from_bbox(
-        bbox, nx=lon.size if request.nx is None else request.nx, ny=lat.size if request.ny is None else request.ny,
-        depths_m=list(request.depths_m)
-    )
+    nx = lon.size if request.nx is None else request.nx
+    ny = lat.size if request.ny is None else request.ny
+    _check_states(nx, ny, len(request.depths_m))
+    return Grid.from_bbox(bbox, nx=nx, ny=ny, depths_m=list(request.depths_m))
+
+
+def _check_states(nx: int, ny: int, n_layers: int) -> None:
+    """Refuse a planning grid the table cannot hold, before the currents are resampled onto it."""
+    n_states = n_layers * ny * nx * N_HEADINGS
+    if nx >= 2 and ny >= 2 and n_states >= MAX_STATES:
+        raise GridError(f"grid: {n_layers} layers x {ny} x {nx} cells x {N_HEADINGS} headings = {n_states:,} states; "
+                        f"a plan holds at most {MAX_STATES - 1:,}")
 
 
 def vehicle_longitudes(bbox: BBox) -> BBox:
@@ -172,8 +182,10 @@ def check_coverage(forecast: Forecast, grid: Grid, goal: Goal | None = None) -> 
     Longitudes compare modulo 360 deg, as resampling reads them (``planner.forecast.resample``): a
     box in -180..180 covers a file on 0..360 (HYCOM's regional files) where it does after a whole turn.
     """
-    if goal is not None and _in_grid(grid, goal) and \
-            not _covered(forecast, np.array([goal.lon_deg]), np.array([goal.lat_deg]))[0]:
+    # The goal's cell centre, not the point: a goal up to half a cell beyond the outermost centres plans (spec section 6).
+    i, j, outside = grid.nearest_cell(goal.lon_deg, goal.lat_deg) if goal is not None else (0, 0, 1.0)
+    if goal is not None and outside <= 0.5 and \
+            not _covered(forecast, grid.lon_deg[i:i + 1], grid.lat_deg[j:j + 1])[0]:
         lon, lat = forecast.lon_deg, forecast.lat_deg
         raise GoalError(f"goal ({goal.lon_deg:g}, {goal.lat_deg:g}) lies outside the forecast {forecast.source}, which "
                         f"covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, lat {np.nanmin(lat):.4f}.."
@@ -190,6 +202,10 @@ def check_coverage(forecast: Forecast, grid: Grid, goal: Goal | None = None) -> 
         )
 
 
+# A curvilinear grid's range is of its 2-D coordinates: a few float32 units of a longitude near 180 deg.
+_CURVILINEAR_TOL_DEG = 1e-4
+
+
 def coverage_fraction(forecast: Forecast, grid: Grid) -> float:
     """The fraction of the grid's cells whose centres lie within the forecast's longitude/latitude range:
     the others have no current and are land to the plan."""
@@ -198,21 +214,16 @@ def coverage_fraction(forecast: Forecast, grid: Grid) -> float:
     return float(lon_ok.mean() * lat_ok.mean())
 
 
-def _in_grid(grid: Grid, goal: Goal) -> bool:
-    """Whether ``goal`` lies in one of the grid's cells (one outside it is refused with its own hint, later)."""
-    b = grid.bbox
-    return (b.west_deg - grid.dlon_deg / 2 <= goal.lon_deg <= b.east_deg + grid.dlon_deg / 2
-            and b.south_deg - grid.dlat_deg / 2 <= goal.lat_deg <= b.north_deg + grid.dlat_deg / 2)
-
-
 def _covered(forecast: Forecast, lon_deg: NDArray[np.float64], lat_deg: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Points within the forecast's longitude (modulo 360 deg; all of them on a periodic axis) and latitude ranges."""
+    """Points within the forecast's longitude (modulo 360 deg; all of them on a periodic axis) and latitude ranges,
+    to the resampler's tolerance: an axis stored in float32 ends a few of its units off the decimal value."""
     lon, lat = forecast.lon_deg, forecast.lat_deg
-    tol = 1e-9
+    lon_tol_deg = axis_snap_tol(lon) if lon.ndim == 1 else _CURVILINEAR_TOL_DEG
+    lat_tol_deg = axis_snap_tol(lat) if lat.ndim == 1 else _CURVILINEAR_TOL_DEG
     lo, hi = float(np.nanmin(lon)), float(np.nanmax(lon))
     lon_ok = np.ones(lon_deg.shape, dtype=bool) if lon.ndim == 1 and is_periodic_lon(lon) else \
-        np.mod(lon_deg - lo + tol, 360.0) <= hi - lo + 2 * tol
-    return lon_ok & (lat_deg >= np.nanmin(lat) - tol) & (lat_deg <= np.nanmax(lat) + tol)
+        np.mod(lon_deg - lo + lon_tol_deg, 360.0) <= hi - lo + 2 * lon_tol_deg
+    return lon_ok & (lat_deg >= np.nanmin(lat) - lat_tol_deg) & (lat_deg <= np.nanmax(lat) + lat_tol_deg)
 
 
 def choose_time_index(forecast: Forecast | ForecastTimes, request: PlanRequest) -> int:

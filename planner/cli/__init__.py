@@ -84,7 +84,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         status = _module(args.command).run(args)
         sys.stdout.flush()  # here, where a reader that went away is caught (below), not at the interpreter's exit
         return status
-    except BrokenPipeError:  # stdout's reader stopped reading (`| head`): not bad input; the work is done
+    except BrokenPipeError as exc:
+        if not _stdout_reader_gone():  # another pipe or socket of the command: an error like any other
+            print(f"lrauv: error: {exc.filename or 'a pipe'}: {exc.strerror or exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        # stdout's reader stopped reading (`| head`): not bad input, and the work is done.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # the exit's own flush must not fail again
         return EXIT_BROKEN_PIPE
     except LrauvError as exc:
@@ -95,8 +99,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"lrauv: error: {where}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except MemoryError as exc:  # a grid, region or forecast too large for this machine
-        print(f"lrauv: error: not enough memory: {exc or 'an allocation failed'}; a smaller grid, region or time span?",
-              file=sys.stderr)
+        print(f"lrauv: error: not enough memory: {str(exc) or 'an allocation failed'}; a smaller grid, region or time "
+              "span?", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("lrauv: interrupted", file=sys.stderr)
@@ -116,6 +120,18 @@ class _Version(argparse.Action):
             text = "unknown (not installed)"
         print(f"lrauv {text}")
         parser.exit()
+
+
+def _stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reading end is closed (poll reports an error on its writing end)."""
+    import select
+
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _fd, events in poller.poll(0))
+    except (OSError, ValueError, AttributeError):  # no poll here, or stdout is no file
+        return False
 
 
 def _command_in(argv: Sequence[str]) -> str | None:

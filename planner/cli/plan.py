@@ -102,11 +102,12 @@ def run(args: argparse.Namespace) -> int:
         check_suffix(args.export_values)  # before the plan's minutes, not after
         check_file_target(args.export_values)
     mission = None if args.mission is None else load_mission(args.mission)
-    request = plan_request(args, mission)
-    if args.plot:
-        check_plot_options(args, len(request.depths_m))
     out = args.out or Path((mission.name if mission else "plan") + ".lrpt")
-    check_file_target(out)
+    check_file_target(out)  # the outputs before the forecast is fetched or made, and before the plan
+    if args.plot:
+        depths = args.depths or (mission.region.depths_m if mission is not None else None)
+        check_plot_options(args, None if depths is None else len(depths))
+    request = plan_request(args, mission)
     t0 = time.perf_counter()
     settings = request.settings
     if progress:
@@ -131,42 +132,39 @@ def run(args: argparse.Namespace) -> int:
         path = nominal_lon_lat(result.solution, start, (args.start[0], args.start[1]))
         result = replace(result, table=replace(result.table, nominal_path=path))
     data = result.table.to_bytes(compress=not args.no_compress)
-    elapsed_s = time.perf_counter() - t0
-    # The values and pictures are written before the table: one that cannot be written stops the command while the
-    # table of an earlier plan at ``out`` is still whole.
-    values = None
-    if args.export_values:
-        history = shlex.join(["lrauv", *sys.argv[1:]]) if sys.argv[1:2] == ["plan"] else "lrauv plan"
-        mission_file = None if mission is None else str(mission.path)
-        values = export_values(result, args.export_values, mission=mission_file, history=history)
-    pictures: list[Path] = []
-    if args.plot:
-        from planner.shore.plots import default_start, moment_of_plan, plot_all
-
-        pictures = plot_all(result.u_m_s, result.v_m_s, result.solution, args.plot,
-                            start=default_start(result.solution) if start is None else start, heading=args.plot_heading,
-                            layer=args.plot_layer, when=moment_of_plan(result),
-                            start_lon_lat=None if args.start is None else (args.start[0], args.start[1]))
-    t_write = time.perf_counter()
+    # The table first: the options and paths of the values and pictures were checked before the plan, and a
+    # failure writing them (a full disk) then costs the extras, never the plan.
     write_atomic(out, data)
-    elapsed_s += time.perf_counter() - t_write
     for line in summary_lines(result, out=out, size=len(data)):
         say(line)
     if start is not None:
         say(start_line(result, args.start, start))
-    say(time_line(result, elapsed_s))
-    if values is not None:
-        say(f"values     {values}")
-    for p in pictures:
-        say(f"picture    {p}")
+    say(time_line(result, time.perf_counter() - t0))
+    if args.export_values:
+        history = shlex.join(["lrauv", *sys.argv[1:]]) if sys.argv[1:2] == ["plan"] else "lrauv plan"
+        mission_file = None if mission is None else str(mission.path)
+        say(f"values     {export_values(result, args.export_values, mission=mission_file, history=history)}")
+    if args.plot:
+        from planner.shore.plots import default_start, moment_of_plan, plot_all
+
+        paths = plot_all(result.u_m_s, result.v_m_s, result.solution, args.plot,
+                         start=default_start(result.solution) if start is None else start, heading=args.plot_heading,
+                         layer=args.plot_layer, when=moment_of_plan(result),
+                         start_lon_lat=None if args.start is None else (args.start[0], args.start[1]))
+        for p in paths:
+            say(f"picture    {p}")
     return 0
 
 
-def check_plot_options(args: argparse.Namespace, n_layers: int) -> None:
-    """``--plot`` and its options, checked before the plan's minutes: a bad one would stop the command after them."""
+def check_plot_options(args: argparse.Namespace, n_layers: int | None) -> None:
+    """``--plot`` and its options, checked before the plan's minutes: a bad one would stop the command after them
+    (``n_layers``: None when no depths are given yet, which the request refuses)."""
+    from planner.contract.atomic import check_folder_target
+
     if args.plot.exists() and not args.plot.is_dir():
         raise LrauvError(f"--plot: {args.plot} is a file: expected a folder for the pictures")
-    if args.plot_layer is not None and not 0 <= args.plot_layer < n_layers:
+    check_folder_target(args.plot)  # a file where a folder of its path should be
+    if args.plot_layer is not None and n_layers is not None and not 0 <= args.plot_layer < n_layers:
         raise LrauvError(f"--plot-layer: expected 0..{n_layers - 1}; got {args.plot_layer}")
     if not 0 <= args.plot_heading < 8:
         raise LrauvError(f"--plot-heading: expected 0..7 (0 = east, counter-clockwise); got {args.plot_heading}")
@@ -192,12 +190,12 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
         if mission.forecast.synthetic_seed is not None:  # say where the generated file is: never beside the mission
             say(f"cache      synthetic forecast (seed {mission.forecast.synthetic_seed}, "
                 f"{mission.forecast.synthetic_hours} h) {forecast_path}")
+        if time_index is None and time_iso is None:  # the mission's step is of its own forecast, not of another file
+            time_index, time_iso = mission.forecast.time_index, mission.forecast.time_iso
         variables = variables or mission.forecast.variables
         grid_file = grid_file or mission.forecast.grid_file
     if forecast_path is None:
         raise LrauvError("plan: no forecast: give --forecast FILE.nc or a mission file")
-    if mission is not None and time_index is None and time_iso is None:  # as batch, evaluate and upload take it
-        time_index, time_iso = mission.forecast.time_index, mission.forecast.time_iso
     if variables is not None and len(variables) != 2:
         raise LrauvError(f"--variables: expected two names U,V; got {','.join(variables)}")
     # Grid.

@@ -11,7 +11,7 @@ from typing import Any, TypeAlias, TypeVar
 # Longitudes west of Greenwich are negative: `--start -118.1,33.45` must read as a value.
 # Python 3.13's argparse accepts it; 3.11/3.12 take anything but "-1" or "-1.5" for an option.
 _NEGATIVE_NUMBER = re.compile(r"^-\.?\d")
-T = TypeVar("T", int, float)
+_Number = TypeVar("_Number", int, float)
 
 
 class CommandParser(argparse.ArgumentParser):
@@ -40,7 +40,6 @@ def floats(text: str, n: int | None, what: str) -> list[float]:
     return values
 
 
-
 def count(text: str) -> int:
     """A whole number >= 1 (workers); an argparse type."""
     return _checked(text, int, lambda v: v >= 1, "a whole number >= 1")
@@ -56,7 +55,7 @@ def seconds(text: str) -> float:
     return _checked(text, float, lambda v: math.isfinite(v) and v > 0, "a number of seconds > 0")
 
 
-def _checked(text: str, parse: Callable[[str], T], ok: Callable[[T], bool], expected: str) -> T:
+def _checked(text: str, parse: Callable[[str], _Number], ok: Callable[[_Number], bool], expected: str) -> _Number:
     try:
         value = parse(text)
     except ValueError:

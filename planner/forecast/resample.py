@@ -64,7 +64,7 @@ def _check_time_index(forecast: Forecast, time_index: int) -> int:
     return t
 
 
-def _axis_snap_tol(src: NDArray[np.float64]) -> float:
+def axis_snap_tol(src: NDArray[np.float64]) -> float:
     """Snap tolerance of a 1-D axis: a few float32 ulps at its largest magnitude (spec section 1)."""
     scale = np.float32(np.max(np.abs(src)))
     tol = _SNAP_ULPS * float(np.spacing(scale))
@@ -101,7 +101,7 @@ def _axis_weights(
     x = np.asarray(x, dtype=np.float64)
     n = src.size
     if tol is None:
-        tol = _axis_snap_tol(src)
+        tol = axis_snap_tol(src)
     k = np.searchsorted(src, x, side="left")  # src[k-1] < x <= src[k]
     lo = np.clip(k - 1, 0, n - 1)
     hi = np.clip(k, 0, n - 1)
@@ -222,7 +222,7 @@ def _resample_regular(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[n
     # nodes, which are the file's nodes around the bbox.
     file_lon, file_lat = forecast.file_lon_lat
     file_lon_axis = _lon_axis(file_lon)
-    tol = _axis_snap_tol(file_lon_axis)
+    tol = axis_snap_tol(file_lon_axis)
     tx = _shift_lon(grid.lon_deg, file_lon_axis[0] - tol, file_lon_axis[-1] + tol)
     turns = np.unique(np.round((tx - grid.lon_deg) / 360.0))
     if turns.size == 1 and turns[0] != 0:
@@ -230,9 +230,9 @@ def _resample_regular(forecast: Forecast, grid: Grid, t: int) -> tuple[NDArray[n
         # instead, exactly (x - 360 is exact for x in 180..720, Sterbenz), so the weights are bit for bit
         # those of the same field on -180..180 and the plan is the same.
         lon_axis, file_lon_axis = lon_axis - 360.0 * turns[0], file_lon_axis - 360.0 * turns[0]
-        tol, tx = _axis_snap_tol(file_lon_axis), grid.lon_deg
+        tol, tx = axis_snap_tol(file_lon_axis), grid.lon_deg
     ax = _axis_weights(lon_axis, tx, below="land", tol=tol)
-    ay = _axis_weights(lat_src, grid.lat_deg, below="land", tol=_axis_snap_tol(file_lat))
+    ay = _axis_weights(lat_src, grid.lat_deg, below="land", tol=axis_snap_tol(file_lat))
     ix0, ix1 = ax.i0 % n_x, ax.i1 % n_x
 
     rows = np.unique(np.concatenate([ay.i0[ay.valid], ay.i1[ay.valid]]))

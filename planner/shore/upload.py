@@ -49,6 +49,9 @@ def upload_mission(mission_path: Path, *, to: str, tables: Sequence[Path] = (), 
     from planner.shore.ftp_client import FtpTimeoutError
     from planner.shore.mission_client import MissionTransferError
 
+    from executive.mavlink_bridge import check_address
+
+    check_address(to, flag="--to")  # before the goals are planned on shore, not after
     say = say or _silent
     mission = load_mission(mission_path)
     key, link_id = _signing(signing_key_file, mission)

@@ -48,10 +48,14 @@ def import_waypoints(wpl_path: Path, base_path: Path, out: Path) -> tuple[Path, 
             raise WaypointError(f"{wpl_path}: item {n}: depth {mg.goal.depth_m:g} m is deeper than the deepest layer "
                                 f"{deepest:g} m of {base_path}")
         if box is not None and nx and ny:  # cell centres lie on the box's edges: its cells reach half a cell beyond
-            half_lon, half_lat = (box.east_deg - box.west_deg) / (nx - 1) / 2, (box.north_deg - box.south_deg) / (ny - 1) / 2
+            half_lon_deg = (box.east_deg - box.west_deg) / (nx - 1) / 2
+            half_lat_deg = (box.north_deg - box.south_deg) / (ny - 1) / 2
             g = mg.goal
-            if not (box.west_deg - half_lon <= g.lon_deg <= box.east_deg + half_lon
-                    and box.south_deg - half_lat <= g.lat_deg <= box.north_deg + half_lat):
+            # Longitudes modulo 360 deg: a box written on 0..360 (as HYCOM's regional files are) holds a
+            # waypoint's -180..180 longitude, as planning reads it.
+            east_of_west_deg = (g.lon_deg - (box.west_deg - half_lon_deg)) % 360.0
+            if not (east_of_west_deg <= box.east_deg - box.west_deg + 2 * half_lon_deg
+                    and box.south_deg - half_lat_deg <= g.lat_deg <= box.north_deg + half_lat_deg):
                 raise WaypointError(f"{wpl_path}: item {n}: ({g.lon_deg:g}, {g.lat_deg:g}) lies outside the region "
                                     f"{box.west_deg:g},{box.south_deg:g},{box.east_deg:g},{box.north_deg:g} of "
                                     f"{base_path}: no plan could reach it")

@@ -194,7 +194,8 @@ def test_a_bad_serial_link_is_one_clear_line(demo_plan, tmp_path: Path, capsys):
     ("--link", "bogus:foo", "--link 'bogus:foo': cannot open it (invalid literal"),
     ("--link", "udpout:127.0.0.1", "--link 'udpout:127.0.0.1': expected udpout:HOST:PORT, a port 0..65535"),
     ("--link", "udpout:127.0.0.1:99999", "--link 'udpout:127.0.0.1:99999': expected udpout:HOST:PORT"),
-    ("--link", "udpout:999.1.1.1:14550", "--link 'udpout:999.1.1.1:14550': expected udpout:HOST:PORT"),
+    ("--link", "udpout:999.1.1.1:14550", "--link 'udpout:999.1.1.1:14550': the host 999.1.1.1 is not an IPv4 address"),
+    ("--link", "udpout::14550", "--link 'udpout::14550': expected udpout:HOST:PORT"),
     ("--gcs", "udpin:0.0.0.0:notaport", "--gcs 'udpin:0.0.0.0:notaport': expected udpin:HOST:PORT"),
 ])
 def test_a_bad_network_link_is_one_clear_line(demo_plan, tmp_path: Path, capsys, flag, address, words):
@@ -207,12 +208,22 @@ def test_a_bad_network_link_is_one_clear_line(demo_plan, tmp_path: Path, capsys,
     assert err.startswith(f"lrauv: error: {words}") and len(err.splitlines()) == 1, err
 
 
-def test_a_bad_upload_address_is_one_clear_line(demo_plan, tmp_path: Path, capsys):
+def test_a_bad_upload_address_is_one_clear_line(tmp_path: Path, capsys):
     from planner.cli import main as lrauv
     from tests.support.helpers import DEMO_MISSION
 
-    table = str(demo_plan.table.save(tmp_path / "t.lrpt"))
-    assert lrauv(["upload", str(DEMO_MISSION), "--to", "udpout:localhost", "--table", table]) == 2
+    # No table: the goal would be planned on shore first, if the address were not checked before that.
+    assert lrauv(["upload", str(DEMO_MISSION), "--to", "udpout:localhost", "--forecast", str(tmp_path / "none.nc")]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "lrauv: error: --to 'udpout:localhost': expected udpout:HOST:PORT, a port 0..65535 " \
                   "(e.g. udpout:127.0.0.1:14550)", err
+
+
+def test_a_listening_link_without_a_host_listens_on_every_interface():
+    from executive.mavlink_bridge import open_link
+
+    conn = open_link("udpin::0", source_system=1, source_component=191)
+    try:
+        assert conn.port.getsockname()[0] == "0.0.0.0"
+    finally:
+        conn.close()

@@ -68,16 +68,6 @@ def test_a_grid_beyond_the_tables_states_is_refused_before_resampling(synthetic_
     assert "a plan holds at most 2,147,483,647" in line
 
 
-def test_the_missions_forecast_step_holds_for_a_forecast_given_by_flag(synthetic_forecast, tmp_path, capsys):
-    mission = tmp_path / "m.yaml"
-    text = Path(DEMO).read_text()
-    assert "  time_index: 0\n" in text
-    mission.write_text(text.replace("  time_index: 0\n", "  time_index: 30\n"))
-    line = error_line(capsys, ["plan", str(mission), f"--forecast={synthetic_forecast}",
-                               f"--out={tmp_path / 'x.lrpt'}", "--quiet"])
-    assert "time index 30 is out of range; the file has 25 steps" in line, line
-
-
 @pytest.fixture(scope="module")
 def west_half(synthetic_forecast, tmp_path_factory) -> Path:
     """The synthetic forecast cut to its 20 westernmost columns: it covers a third of the demo's region."""
@@ -245,3 +235,29 @@ def test_a_forecast_too_large_for_memory_is_one_line(tmp_path):
     assert "Traceback" not in proc.stderr
     assert "lrauv: error: not enough memory: Unable to allocate" in proc.stderr, proc.stderr
     assert not (tmp_path / "huge.nc").exists()
+
+
+def test_a_goal_half_a_cell_beyond_the_edge_still_plans(synthetic_forecast, tmp_path, capsys):
+    """The goal's cell centre is what must have a current, not the point (spec section 6)."""
+    assert main(["plan", DEMO, f"--forecast={synthetic_forecast}", "--goal=-118.268,33.4,0",
+                 f"--out={tmp_path / 'x.lrpt'}", "--quiet"]) == 0
+    assert "warning" not in capsys.readouterr().out
+
+
+def test_a_forecast_with_float32_axes_covers_its_own_region(synthetic_forecast, tmp_path, capsys):
+    narrow = tmp_path / "f32.nc"
+    with xr.open_dataset(synthetic_forecast) as ds:
+        ds.assign_coords(lat=ds.lat.astype("float32"), lon=ds.lon.astype("float32")).to_netcdf(narrow)
+    assert main(["plan", DEMO, f"--forecast={narrow}", f"--out={tmp_path / 'x.lrpt'}", "--quiet"]) == 0
+    assert "warning" not in capsys.readouterr().out
+
+
+def test_the_state_limit_is_the_plans_not_the_sampling_grids():
+    """A physical plan's currents are sampled on a grid up to 8 times finer: that grid is not a plan's."""
+    from planner.contract.geodesy import BBox
+    from planner.grid import Grid
+    from planner.physical.model import fine_grid
+
+    grid = Grid.from_bbox(BBox(west_deg=-118.0, south_deg=33.0, east_deg=-117.0, north_deg=34.0), nx=1200, ny=1200,
+                          depths_m=[0.0, 5.0, 10.0, 15.0])
+    assert fine_grid(grid, 8).nx == 9593

@@ -322,3 +322,14 @@ def test_import_errors_raise_planner_errors_naming_the_file(tmp_path):
     assert not out.exists()
     with pytest.raises(SystemExit):
         _cli(["waypoints", "export", str(DEMO), str(tmp_path / "x.waypoints"), "--home", "1,2,3"])
+
+
+def test_a_base_mission_on_0_to_360_longitudes_takes_waypoints_on_minus_180_to_180(tmp_path):
+    base = _mission_with_goals(tmp_path, "goals: [{lat_deg: 33.4, lon_deg: 242.2, depth_m: 0}]\n")
+    text = base.read_text()
+    assert "bbox: [-118.26, 33.30, -117.70, 33.70]" in text
+    base.write_text(text.replace("bbox: [-118.26, 33.30, -117.70, 33.70]", "bbox: [241.74, 33.30, 242.30, 33.70]"))
+    wpl = write_wpl(tmp_path / "goals.waypoints", goals_to_items((goal(33.4, -117.8, 0.0),), **HOME))
+    out = tmp_path / "new.yaml"
+    assert _cli(["waypoints", "import", str(wpl), "--mission", str(base), "--out", str(out)]) == 0
+    assert "lon_deg: -117.8" in out.read_text()
