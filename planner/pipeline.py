@@ -182,15 +182,15 @@ def check_coverage(forecast: Forecast, grid: Grid, goal: Goal | None = None) -> 
     Longitudes compare modulo 360 deg, as resampling reads them (``planner.forecast.resample``): a
     box in -180..180 covers a file on 0..360 (HYCOM's regional files) where it does after a whole turn.
     """
-    # The goal's cell centre, not the point: a goal up to half a cell beyond the outermost centres plans (spec section 6).
-    i, j, outside = grid.nearest_cell(goal.lon_deg, goal.lat_deg) if goal is not None else (0, 0, 1.0)
-    if goal is not None and outside <= 0.5 and \
-            not _covered(forecast, grid.lon_deg[i:i + 1], grid.lat_deg[j:j + 1])[0]:
-        lon, lat = forecast.lon_deg, forecast.lat_deg
-        raise GoalError(f"goal ({goal.lon_deg:g}, {goal.lat_deg:g}) lies outside the forecast {forecast.source}, which "
-                        f"covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, lat {np.nanmin(lat):.4f}.."
-                        f"{np.nanmax(lat):.4f}")
     lon, lat = forecast.lon_deg, forecast.lat_deg
+    if goal is not None:
+        # The goal's cell centre, not the point: a goal up to half a cell beyond the outermost centres plans
+        # (spec section 6); one further out is refused later, with its own hint.
+        i, j, outside = grid.nearest_cell(goal.lon_deg, goal.lat_deg)
+        if outside <= 0.5 and not _covered(forecast, grid.lon_deg[i:i + 1], grid.lat_deg[j:j + 1])[0]:
+            raise GoalError(f"goal ({goal.lon_deg:g}, {goal.lat_deg:g}) lies outside the forecast {forecast.source}, "
+                            f"which covers lon {np.nanmin(lon):.4f}..{np.nanmax(lon):.4f}, lat {np.nanmin(lat):.4f}.."
+                            f"{np.nanmax(lat):.4f}")
     b = grid.bbox
     lon_lo, lon_hi = float(np.nanmin(lon)), float(np.nanmax(lon))
     if (not lon_shifts(b.west_deg, b.east_deg, lon_lo, lon_hi)

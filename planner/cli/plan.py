@@ -161,9 +161,10 @@ def check_plot_options(args: argparse.Namespace, n_layers: int | None) -> None:
     (``n_layers``: None when no depths are given yet, which the request refuses)."""
     from planner.contract.atomic import check_folder_target
 
-    if args.plot.exists() and not args.plot.is_dir():
-        raise LrauvError(f"--plot: {args.plot} is a file: expected a folder for the pictures")
-    check_folder_target(args.plot)  # a file where a folder of its path should be
+    try:
+        check_folder_target(args.plot)
+    except NotADirectoryError as exc:  # the folder, or one above it, is a file
+        raise LrauvError(f"--plot: {exc.filename} is a file: expected a folder for the pictures") from None
     if args.plot_layer is not None and n_layers is not None and not 0 <= args.plot_layer < n_layers:
         raise LrauvError(f"--plot-layer: expected 0..{n_layers - 1}; got {args.plot_layer}")
     if not 0 <= args.plot_heading < 8:

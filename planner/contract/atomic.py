@@ -44,11 +44,8 @@ def atomic_target(path: str | os.PathLike[str]) -> Iterator[Path]:
     A folder that cannot hold the file is refused before anything is written, and an error of the
     temporary file's names ``path``: the user gave that name, not the temporary one.
     """
+    check_file_target(path)
     target = Path(path)
-    if not str(path):
-        raise FileNotFoundError(errno.ENOENT, "expected a file name; got an empty one", "''")
-    if target.is_dir():
-        raise IsADirectoryError(errno.EISDIR, "is a folder: expected a file name", str(path))
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
     except FileExistsError as exc:  # a file stands where a folder of the path should be

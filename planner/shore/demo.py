@@ -10,6 +10,7 @@ where everything is. Both processes are always stopped, also on errors.
 from __future__ import annotations
 
 import csv
+import math
 import os
 import subprocess
 import sys
@@ -41,9 +42,7 @@ class DemoResult:
 def check_inputs(*, table: Path, mission: Path | None, truth: Path, timeout_s: float, speedup: float) -> None:
     """What the executive would refuse, refused here before a process starts or a file of an earlier run in
     the output folder is replaced: the table, the mission, the table's goal among the mission's, the limits."""
-    import math
-
-    from executive.goal_tables import goal_matches
+    from executive.goal_tables import assign
     from planner.contract.errors import ShoreError
     from planner.contract.mission import load_mission
 
@@ -54,12 +53,8 @@ def check_inputs(*, table: Path, mission: Path | None, truth: Path, timeout_s: f
     if not truth.is_file():
         raise ShoreError(f"--truth {truth}: no such file")
     loaded = PolicyTable.load(table)
-    if mission is not None:
-        goals = load_mission(mission).goals
-        if not any(goal_matches(loaded, g.goal) for g in goals):
-            raise ShoreError(f"{table}: its goal ({loaded.goal_lon_deg:.6f}, {loaded.goal_lat_deg:.6f}, "
-                             f"{loaded.goal_depth_m:g} m, radius {loaded.goal_radius_cells}) matches no goal of "
-                             f"{mission}: plan the table for this mission")
+    if mission is not None:  # the executive's own check: a table must serve one of the mission's goals
+        assign(load_mission(mission).goals, [(str(table), loaded)], str(mission))
 
 
 def run_closed_loop(*, table: Path, mission: Path | None, truth: Path, start: str, depth_m: float, heading_deg: float,

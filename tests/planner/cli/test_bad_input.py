@@ -157,7 +157,8 @@ def test_a_demo_with_a_table_for_another_goal_starts_nothing_and_writes_nothing(
     out = tmp_path / "demo"
     line = error_line(capsys, ["demo", "--table", str(table), "--mission", DEMO, "--truth", str(synthetic_forecast),
                                "--start=-118.0,33.45", "--out", str(out), "--quiet"])
-    assert f"{table}: its goal (-118.200000, 33.400000, 0 m, radius 1) matches no goal of {DEMO}" in line, line
+    assert f"{table}: its goal (-118.200000, 33.400000, 0 m, radius 1) matches no goal of the mission in {DEMO}" \
+        in line, line
     assert not out.exists()
 
 
