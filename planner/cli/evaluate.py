@@ -17,6 +17,7 @@ from planner.contract.arguments import Subcommands
 from planner.contract.atomic import write_atomic
 from planner.contract.columns import say
 from planner.contract.errors import LrauvError
+from planner.shore.evaluation.comparison import CONFIDENCE, EnergyComparison, pairwise
 from planner.shore.evaluation.runs import (
     DEFAULT_METHODS,
     METHODS,
@@ -90,8 +91,11 @@ def run(args: argparse.Namespace) -> int:
             note(f"{len(campaign.starts)} starts x {len(methods)} methods, {runner.describe()}")
             campaign = run_all(campaign, runner=runner, meter=meter)
     summaries = summarise(campaign.results, methods)
+    comparisons = pairwise(campaign.results, methods)
     resolution = resolution_change(campaign) if args.resolution else None
     say(format_table(summaries))
+    if comparisons:
+        say("\n" + format_comparisons(comparisons))
     # A run cut before the mission's own limit may be a vehicle waiting for a tide (docs/evaluation.md).
     timed_out = sum(s.outcomes["timed_out"] for s in summaries)
     mission_h = mission.safety.max_mission_time_s / 3600.0
@@ -108,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         meta = {"mission": str(args.mission), "forecast": str(forecast), "truth": [str(p) for p in args.truth],
                 "starts": args.starts, "seed": args.seed, "dt_s": args.dt_s, "max_hours": args.max_hours,
                 "replan_h": args.replan_h, "cruise_speed_m_s": mission.settings.vehicle.cruise_speed_m_s}
-        for path in write_outputs(args.out, campaign.results, summaries, resolution, meta):
+        for path in write_outputs(args.out, campaign.results, summaries, resolution, meta, comparisons):
             say(f"wrote      {path}")
     return 0
 
@@ -141,6 +145,19 @@ def format_table(summaries: list[MethodSummary]) -> str:
     return "\n".join(lines)
 
 
+def format_comparisons(comparisons: list[EnergyComparison]) -> str:
+    """Each pair of methods: the mean energy's ratio on the starts both arrived from, with its interval."""
+    lines = [f"energy, method against method on the starts both arrived from (mean over mean - 1; "
+             f"{CONFIDENCE:.0%} interval, paired bootstrap over those starts)"]
+    width = max(len(f"{c.method} vs {c.against}") for c in comparisons)
+    for c in comparisons:
+        interval = (f"[{_pct(c.low, signed=True)}, {_pct(c.high, signed=True)}]" if math.isfinite(c.low)
+                    else "[-]")
+        lines.append(f"  {f'{c.method} vs {c.against}':<{width}} {_pct(c.ratio, signed=True):>7} {interval:<18}"
+                     f" {c.starts} starts")
+    return "\n".join(lines)
+
+
 def _pct(x: float, *, signed: bool = False) -> str:
     if not math.isfinite(x):
         return "-"
@@ -152,7 +169,8 @@ def _num(x: float, digits: int) -> str:
 
 
 def write_outputs(out: Path, results: tuple[RunResult, ...], summaries: list[MethodSummary],
-                  resolution: dict[str, dict[str, float]] | None, meta: dict[str, Any]) -> list[Path]:
+                  resolution: dict[str, dict[str, float]] | None, meta: dict[str, Any],
+                  comparisons: list[EnergyComparison]) -> list[Path]:
     """runs.csv, summary.json and the plots, each written atomically."""
     buf = io.StringIO()
     w = csv.writer(buf)
@@ -161,7 +179,8 @@ def write_outputs(out: Path, results: tuple[RunResult, ...], summaries: list[Met
         w.writerow([r.method, r.start, r.outcome, f"{r.time_s:.1f}", f"{r.energy_wh:.4f}",
                     "" if not math.isfinite(r.predicted_wh) else f"{r.predicted_wh:.4f}", int(r.marked_reachable)])
     paths = [write_atomic(out / "runs.csv", buf.getvalue().encode())]
-    summary = {"meta": meta, "methods": [_clean(asdict(s)) for s in summaries], "resolution": resolution}
+    summary = {"meta": meta, "methods": [_clean(asdict(s)) for s in summaries], "resolution": resolution,
+               "comparisons": [_clean(asdict(c)) for c in comparisons], "confidence": CONFIDENCE}
     paths.append(write_atomic(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode()))
     paths.extend(plot_evaluation(out, results, summaries))
     return paths

@@ -162,6 +162,18 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
         assert m["success_rate"] == pytest.approx(from_csv["arrived"] / n)
         assert m["marked_reachable"] == sum(int(r["marked_reachable"]) for r in runs if r["method"] == m["method"])
         assert int(rows[m["method"]][3]) == m["outcomes"]["arrived"]  # the table's "arrived" column
+    # Each pair of methods once, over the starts both arrived from; against naive, the table's "vs naive".
+    pairs = [(c["method"], c["against"]) for c in summary["comparisons"]]
+    assert pairs == [(a, b) for i, a in enumerate(DEFAULT_METHODS) for b in DEFAULT_METHODS[i + 1:]]
+    arrived = {(r["method"], int(r["start"])) for r in runs if r["outcome"] == "arrived"}
+    by_method = {m["method"]: m for m in summary["methods"]}
+    for c in summary["comparisons"]:
+        assert c["starts"] == sum((c["method"], s) in arrived and (c["against"], s) in arrived for s in range(n))
+        if c["starts"] >= 2:
+            assert c["low"] <= c["ratio"] <= c["high"]
+        if c["against"] == "naive" and c["starts"]:
+            assert c["ratio"] == pytest.approx(by_method[c["method"]]["energy_vs_naive"])
+    assert "paired bootstrap" in printed.out
     for name in ("outcomes.png", "energy.png"):
         data = (out / name).read_bytes()
         assert data[:8] == PNG_SIGNATURE and len(data) > 1000, name
