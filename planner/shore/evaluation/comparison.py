@@ -22,6 +22,7 @@ from planner.shore.evaluation.runs import RunResult
 
 RESAMPLES = 4000
 CONFIDENCE = 0.95
+_PICKS = 1 << 20  # start indices drawn at once (8 MB)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -51,8 +52,12 @@ def compare_energy(results: Sequence[RunResult], method: str, against: str, *, r
     ratio = float(ea.mean() / eb.mean() - 1.0)
     if len(common) < 2:
         return EnergyComparison(method=method, against=against, starts=1, ratio=ratio, low=math.nan, high=math.nan)
-    pick = np.random.default_rng(seed).integers(0, len(common), size=(resamples, len(common)))
-    spread = ea[pick].mean(axis=1) / eb[pick].mean(axis=1) - 1.0
+    rng = np.random.default_rng(seed)
+    spread = np.empty(resamples)
+    rows = max(1, _PICKS // len(common))  # resamples drawn at a time: memory stays flat in the starts
+    for lo in range(0, resamples, rows):
+        pick = rng.integers(0, len(common), size=(min(rows, resamples - lo), len(common)))
+        spread[lo:lo + pick.shape[0]] = ea[pick].mean(axis=1) / eb[pick].mean(axis=1) - 1.0
     tail = 100.0 * (1.0 - CONFIDENCE) / 2.0
     low, high = np.percentile(spread, [tail, 100.0 - tail])
     return EnergyComparison(method=method, against=against, starts=len(common), ratio=ratio, low=float(low),
