@@ -380,9 +380,10 @@ def _authority(helm: HelmState, vehicle: VehicleState, config: HelmConfig, now_s
             why = "the autopilot was disarmed, not asked for"
         elif failsafe and not helm.seen_failsafe:
             why = "an autopilot failsafe is active (HEARTBEAT MAV_STATE_CRITICAL)"
-    helm = replace(helm, seen_mode=mode, seen_armed=armed, seen_failsafe=failsafe, asked_modes=asked)
+    if (mode, armed, failsafe, asked) != (helm.seen_mode, helm.seen_armed, helm.seen_failsafe, helm.asked_modes):
+        helm = replace(helm, seen_mode=mode, seen_armed=armed, seen_failsafe=failsafe, asked_modes=asked)
     if why is None:
-        return helm
+        return helm  # the same object when nothing changed (most decisions): no copy of the whole state
     out.events.append(Event("error", f"overridden: {why}; the executive commands nothing until an operator resumes"
                                      " (MAV_CMD_MISSION_START or a mission upload)"))
     return replace(helm, phase=Phase.OVERRIDDEN, overridden=why, activity=None, target_sent_s=None)

@@ -86,8 +86,8 @@ def screen(gate: Gate, before: VehicleState, after: VehicleState, kind: str, lim
     ``time_s``: the message's continuous vehicle time (``stamp``), which replaces the raw one across a wrap.
     """
     events: list[Event] = []
-    if time_s is not None and kind in ("GLOBAL_POSITION_INT", "ATTITUDE"):
-        after = replace(after, time_s=time_s)
+    if time_s is not None and kind in ("GLOBAL_POSITION_INT", "ATTITUDE") and after.time_s != time_s:
+        after = replace(after, time_s=time_s)  # across a wrap: the copy only when it changes something
     t = after.time_s
     vehicle = after
     if kind == "GLOBAL_POSITION_INT":
@@ -202,6 +202,11 @@ class Stamped:
     text: str | None = None
 
 
+def _undoubted(boot: BootTime) -> BootTime:
+    """``boot`` with no doubt pending; itself when it has none (every message in order: no copy)."""
+    return boot if boot.doubt_s is None and boot.doubts == 0 else replace(boot, doubt_s=None, doubts=0)
+
+
 def stamp(boot: BootTime, raw_s: float, *, last_s: float | None, expected_s: float | None, rate: float,
           wall_s: float, limits: Limits) -> Stamped:
     """Judge one message's ``time_boot_ms`` (in s) against the newest accepted time and the clock's extrapolation.
@@ -213,7 +218,7 @@ def stamp(boot: BootTime, raw_s: float, *, last_s: float | None, expected_s: flo
     """
     t = raw_s + boot.epoch_s
     if last_s is None or expected_s is None:
-        return Stamped(replace(boot, doubt_s=None, doubts=0), "take", t)
+        return Stamped(_undoubted(boot), "take", t)
     if last_s - boot.epoch_s > WRAP_S - _WRAP_WINDOW_S and raw_s < _WRAP_WINDOW_S:
         epoch = boot.epoch_s + WRAP_S
         return Stamped(BootTime(epoch_s=epoch), "wrapped", raw_s + epoch,
@@ -221,7 +226,7 @@ def stamp(boot: BootTime, raw_s: float, *, last_s: float | None, expected_s: flo
     forward = t > expected_s + limits.max_clock_jump_s
     back = t < last_s - _REBOOT_BACKSTEP_S
     if not (forward or back):
-        return Stamped(replace(boot, doubt_s=None, doubts=0), "take", t)
+        return Stamped(_undoubted(boot), "take", t)
     slack = limits.max_clock_jump_s
     agrees = (boot.doubt_s is not None
               and abs(t - (boot.doubt_s + rate * max(0.0, wall_s - boot.doubt_wall_s))) <= slack)
