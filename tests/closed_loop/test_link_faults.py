@@ -23,7 +23,7 @@ from executive.helm import DEFAULT_RATES
 from executive.recorder import Topic, read_messages
 from executive.state import Phase
 from planner.contract.modes import SubMode
-from tests.support.helpers import assert_audit_clean, at_goal_by_the_helms_rule, start_west_of_goal, wait_until
+from tests.support.helpers import assert_audit_clean, start_west_of_goal, wait_until
 from tests.support.linkfault import Faults, LinkFaultProxy
 from tests.support.loop_rig import FAILSAFE_SLACK_S, ExecThread, Sim
 from planner.shore.demo import read_track
@@ -51,6 +51,7 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 # Spikes: 150-450 s apart, 20 s long, every datagram held 2 s more (vehicle time).
 SPIKES = {"spike_s": 2.0, "spike_every_s": 300.0, "spike_duration_s": 20.0}
 LOSSY = Faults(loss=0.30, duplicate=0.05, reorder=0.05, **SPIKES)
+_TELEMETRY_AGE_S = 5.0  # vehicle seconds: a position the executive decides on is at most this old (spikes of 2 s)
 
 
 def _logs(path) -> list[str]:  # type: ignore[no-untyped-def]
@@ -134,24 +135,6 @@ def test_the_proxy_drops_duplicates_reorders_delays_and_cuts_as_asked():
         near.close()
 
 
-def test_the_goal_check_on_the_true_track_is_the_helms_own(demo_plan):
-    """The check the faulty-link missions make of the vehicle's true end position: in a goal cell, or
-    within the helm's cell margin beyond one (the executive leaves a cell only that far past its edge);
-    not a cell away, nor beyond the margin."""
-    table = demo_plan.table
-    lat, lon = table.goal_lat_deg, table.goal_lon_deg
-    goal_i = round((lon - table.lon0_deg) / table.dlon_deg)
-    west = [i for i in range(goal_i, -1, -1) if table.lookup(lat, table.lon0_deg + i * table.dlon_deg, 0.0, 0.0).reason
-            == "at_goal"][-1]  # the westmost goal cell on the goal's row
-    edge = table.lon0_deg + (west - 0.5) * table.dlon_deg
-    assert at_goal_by_the_helms_rule(table, lat, lon, 0.0)
-    assert at_goal_by_the_helms_rule(table, lat, edge + 0.01 * table.dlon_deg, 0.0)  # just inside
-    assert at_goal_by_the_helms_rule(table, lat, edge - 0.05 * table.dlon_deg, 0.0)  # set back, within the margin
-    assert table.lookup(lat, edge - 0.05 * table.dlon_deg, 0.0, 0.0).reason == "ok"
-    assert not at_goal_by_the_helms_rule(table, lat, edge - 0.2 * table.dlon_deg, 0.0)  # beyond it
-    assert not at_goal_by_the_helms_rule(table, lat, edge - 1.0 * table.dlon_deg, 0.0)
-
-
 @pytest.mark.parametrize("faults", ["lossy both ways", "uplink spikes only"])
 def test_the_mission_reaches_its_goal_through_a_faulty_link(demo_plan, synthetic_forecast, tmp_path, faults):
     """30 % loss, 5 % duplication, reordering and 2 s spikes both ways; or commands delayed 2 s only.
@@ -187,10 +170,15 @@ def test_the_mission_reaches_its_goal_through_a_faulty_link(demo_plan, synthetic
             proxy.close()
         sim.stop()
     assert summary is not None and summary.reached, summary
-    # The vehicle itself, not only the executive's picture of it, is in the goal region.
+    # The vehicle itself, not only the executive's picture of it, was in a goal cell when the executive
+    # arrived: the true track near that vehicle time, allowing for the age of the telemetry it decided on
+    # (2 s spikes). Not the track's last row: after the executive stops, the simulator runs on for as long
+    # as the machine's load keeps it, and the current moves the vehicle.
     truth = read_track(track)
-    lat_t, lon_t, depth_t = truth["lat_deg"][-1], truth["lon_deg"][-1], truth["depth_m"][-1]
-    assert at_goal_by_the_helms_rule(table, lat_t, lon_t, depth_t), (lat_t, lon_t, depth_t)
+    near = [k for k, t in enumerate(truth["time_s"]) if abs(t - summary.arrival_s) <= _TELEMETRY_AGE_S]
+    assert near and any(table.lookup(truth["lat_deg"][k], truth["lon_deg"][k], truth["depth_m"][k],
+                                     truth["heading_deg"][k]).reason == "at_goal" for k in near), (
+        summary.arrival_s, [(truth["time_s"][k], truth["lat_deg"][k], truth["lon_deg"][k]) for k in near])
     # The faults really happened, in the directions asked for.
     u, d = proxy.counters("up"), proxy.counters("down")
     failsafes = sum("heartbeat lost" in text for _, text in proxy.texts)

@@ -36,24 +36,6 @@ def start_west_of_goal(table, cells: int = 3) -> tuple[float, float]:  # type: i
     return lon, lat
 
 
-def at_goal_by_the_helms_rule(table, lat_deg: float, lon_deg: float, depth_m: float) -> bool:  # type: ignore[no-untyped-def]
-    """Whether a true position is in a goal cell, or within the helm's cell margin of one.
-
-    The helm keeps a cell until the vehicle is ``CELL_MARGIN`` of a spacing beyond its edge
-    (``PolicyTable.lookup_held``), so a vehicle that entered a goal cell by millimetres and was
-    set back across its edge by the current after the executive stopped is still at the goal;
-    how long the simulator runs on after that depends on the machine's load, not the mission.
-    """
-    from planner.contract.actions import Action
-    from planner.contract.table import CELL_MARGIN
-
-    cell = table.locate(lat_deg, lon_deg, depth_m)
-    if cell is None:
-        return False
-    goal = (table.actions[cell[0]] == int(Action.AT_GOAL)).any(axis=-1)
-    return any(table.near_cell(lat_deg, lon_deg, int(j), int(i), CELL_MARGIN) for j, i in zip(*goal.nonzero()))
-
-
 def wait_until(predicate, timeout_s: float) -> bool:  # type: ignore[no-untyped-def]
     """Poll ``predicate`` every 20 ms until it is true (True) or ``timeout_s`` passes (False)."""
     deadline = time.monotonic() + timeout_s
