@@ -17,7 +17,7 @@ from planner.contract.arguments import Subcommands
 from planner.contract.atomic import write_atomic
 from planner.contract.columns import say
 from planner.contract.errors import LrauvError
-from planner.shore.evaluation.comparison import CONFIDENCE, EnergyComparison, pairwise
+from planner.shore.evaluation.comparison import CONFIDENCE, EnergyComparison, every_pair
 from planner.shore.evaluation.runs import (
     DEFAULT_METHODS,
     METHODS,
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
             note(f"{len(campaign.starts)} starts x {len(methods)} methods, {runner.describe()}")
             campaign = run_all(campaign, runner=runner, meter=meter)
     summaries = summarise(campaign.results, methods)
-    comparisons = pairwise(campaign.results, methods)
+    comparisons = every_pair(campaign.results, methods)
     resolution = resolution_change(campaign) if args.resolution else None
     say(format_table(summaries))
     if comparisons:
@@ -153,8 +153,8 @@ def format_comparisons(comparisons: list[EnergyComparison]) -> str:
     for c in comparisons:
         interval = (f"[{_pct(c.low, signed=True)}, {_pct(c.high, signed=True)}]" if math.isfinite(c.low)
                     else "[-]")
-        lines.append(f"  {f'{c.method} vs {c.against}':<{width}} {_pct(c.ratio, signed=True):>7} {interval:<18}"
-                     f" {c.starts} starts")
+        lines.append(f"  {f'{c.method} vs {c.against}':<{width}} {_pct(c.excess, signed=True):>7} {interval:<18}"
+                     f" {c.starts} start{'' if c.starts == 1 else 's'}")
     return "\n".join(lines)
 
 

@@ -6,7 +6,7 @@ couple of hundred starts whose energies spread by tens of per cent, a few per ce
 the noise of which starts were drawn, so each ratio comes with a 95 % interval from a paired
 bootstrap over those starts (Efron and Tibshirani, "An Introduction to the Bootstrap", 1993,
 ch. 13, the percentile interval): the starts are resampled with replacement, each keeping its
-pair of energies, and the ratio recomputed. The resampling is seeded, so the same runs always
+pair of energies, and the excess recomputed. The resampling is seeded, so the same runs always
 give the same interval.
 """
 
@@ -22,18 +22,19 @@ from planner.shore.evaluation.runs import RunResult
 
 RESAMPLES = 4000
 CONFIDENCE = 0.95
-_PICKS = 1 << 20  # start indices drawn at once (8 MB)
+_PICKS = 1 << 20  # start indices drawn at once: 8 MB, and twice that for the energies they pick
 
 
 @dataclass(frozen=True, kw_only=True)
 class EnergyComparison:
-    """``method``'s mean energy over ``against``'s, less one, on the ``starts`` both arrived from,
-    and its ``CONFIDENCE`` interval (``low``, ``high``; NaN with fewer than two starts)."""
+    """``excess``: ``method``'s mean energy over ``against``'s, less one (-0.1: a tenth less), on the
+    ``starts`` both arrived from, and its ``CONFIDENCE`` interval (``low``, ``high``; NaN with fewer
+    than two starts)."""
 
     method: str
     against: str
     starts: int
-    ratio: float
+    excess: float
     low: float
     high: float
 
@@ -47,11 +48,11 @@ def compare_energy(results: Sequence[RunResult], method: str, against: str, *, r
     ea = np.array([a[s] for s in common])
     eb = np.array([b[s] for s in common])
     if not common:
-        return EnergyComparison(method=method, against=against, starts=0, ratio=math.nan, low=math.nan,
+        return EnergyComparison(method=method, against=against, starts=0, excess=math.nan, low=math.nan,
                                 high=math.nan)
-    ratio = float(ea.mean() / eb.mean() - 1.0)
+    excess = float(ea.mean() / eb.mean() - 1.0)
     if len(common) < 2:
-        return EnergyComparison(method=method, against=against, starts=1, ratio=ratio, low=math.nan, high=math.nan)
+        return EnergyComparison(method=method, against=against, starts=1, excess=excess, low=math.nan, high=math.nan)
     rng = np.random.default_rng(seed)
     spread = np.empty(resamples)
     rows = max(1, _PICKS // len(common))  # resamples drawn at a time: memory stays flat in the starts
@@ -60,10 +61,10 @@ def compare_energy(results: Sequence[RunResult], method: str, against: str, *, r
         spread[lo:lo + pick.shape[0]] = ea[pick].mean(axis=1) / eb[pick].mean(axis=1) - 1.0
     tail = 100.0 * (1.0 - CONFIDENCE) / 2.0
     low, high = np.percentile(spread, [tail, 100.0 - tail])
-    return EnergyComparison(method=method, against=against, starts=len(common), ratio=ratio, low=float(low),
+    return EnergyComparison(method=method, against=against, starts=len(common), excess=excess, low=float(low),
                             high=float(high))
 
 
-def pairwise(results: Sequence[RunResult], methods: Sequence[str]) -> list[EnergyComparison]:
+def every_pair(results: Sequence[RunResult], methods: Sequence[str]) -> list[EnergyComparison]:
     """Each method against each one after it in ``methods``, in that order."""
     return [compare_energy(results, m, other) for i, m in enumerate(methods) for other in methods[i + 1:]]

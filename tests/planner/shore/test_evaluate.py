@@ -170,9 +170,9 @@ def test_evaluate_end_to_end_writes_table_csv_json_and_plots(tmp_path, capsys):
     for c in summary["comparisons"]:
         assert c["starts"] == sum((c["method"], s) in arrived and (c["against"], s) in arrived for s in range(n))
         if c["starts"] >= 2:
-            assert c["low"] <= c["ratio"] <= c["high"]
+            assert c["low"] <= c["excess"] <= c["high"]
         if c["against"] == "naive" and c["starts"]:
-            assert c["ratio"] == pytest.approx(by_method[c["method"]]["energy_vs_naive"])
+            assert c["excess"] == pytest.approx(by_method[c["method"]]["energy_vs_naive"])
     assert "paired bootstrap" in printed.out
     for name in ("outcomes.png", "energy.png"):
         data = (out / name).read_bytes()
