@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -121,6 +121,14 @@ class Grid:
         """Nearest layer; at an exact midpoint the lower index (spec section 6)."""
         d = np.abs(self.depth_m - depth_m)
         return int(np.argmin(d))
+
+
+def vehicle_longitudes(bbox: BBox) -> BBox:
+    """``bbox`` on -180..180: a box wholly east of 180 deg (0..360 longitudes, as HYCOM's regional files
+    use) is turned by -360 deg, exactly (Sterbenz); any other box is kept as given."""
+    if bbox.west_deg < 180.0 or bbox.east_deg > 540.0:
+        return bbox
+    return replace(bbox, west_deg=bbox.west_deg - 360.0, east_deg=bbox.east_deg - 360.0)
 
 
 def _round_half_down(x: float) -> int:

@@ -29,7 +29,7 @@ from planner.forecast import (
 from planner.forecast.ensemble import ensemble_mean
 from planner.forecast.error import ErrorEstimate, measure_error
 from planner.forecast.resample import axis_snap_tol, resample
-from planner.grid import Grid
+from planner.grid import Grid, vehicle_longitudes
 from planner.contract.columns import fit
 from planner.contract.geodesy import BBox
 from planner.compile_note import COMPILING, needs_compile
@@ -157,14 +157,6 @@ def _check_states(nx: int, ny: int, n_layers: int) -> None:
     if nx >= 2 and ny >= 2 and n_states >= MAX_STATES:
         raise GridError(f"grid: {n_layers} layers x {ny} x {nx} cells x {N_HEADINGS} headings = {n_states:,} states; "
                         f"a plan holds at most {MAX_STATES - 1:,}")
-
-
-def vehicle_longitudes(bbox: BBox) -> BBox:
-    """``bbox`` on -180..180: a box wholly east of 180 deg (0..360 longitudes, as HYCOM's regional files
-    use) is turned by -360 deg, exactly (Sterbenz); any other box is kept as given."""
-    if bbox.west_deg < 180.0 or bbox.east_deg > 540.0:
-        return bbox
-    return replace(bbox, west_deg=bbox.west_deg - 360.0, east_deg=bbox.east_deg - 360.0)
 
 
 def native_spacing_deg(forecast: Forecast) -> float | None:

@@ -146,7 +146,7 @@ def format_table(summaries: list[MethodSummary]) -> str:
 
 
 def format_comparisons(comparisons: list[EnergyComparison]) -> str:
-    """Each pair of methods: the mean energy's ratio on the starts both arrived from, with its interval."""
+    """Each pair of methods: the excess of the mean energy on the starts both arrived from, with its interval."""
     lines = [f"energy, method against method on the starts both arrived from (mean over mean - 1; "
              f"{CONFIDENCE:.0%} interval, paired bootstrap over those starts)"]
     width = max(len(f"{c.method} vs {c.against}") for c in comparisons)

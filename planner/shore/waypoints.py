@@ -19,6 +19,7 @@ from planner.contract.atomic import atomic_target
 from planner.contract.errors import MissionError
 from planner.contract.mission import goals_to_items, items_to_goals
 from planner.contract.waypoints import WaypointError, read_wpl, write_wpl
+from planner.grid import Grid, vehicle_longitudes
 
 
 def export_waypoints(mission_path: Path, out: Path, *, home: tuple[float, float] | None = None) -> tuple[Path, int]:
@@ -43,22 +44,20 @@ def import_waypoints(wpl_path: Path, base_path: Path, out: Path) -> tuple[Path, 
     base = load_mission(base_path)
     deepest = base.region.depths_m[-1]
     box, nx, ny = base.region.bbox, base.region.nx, base.region.ny
+    # The planning grid the mission's plans will have, in the vehicle's longitudes (a box written on 0..360
+    # holds a waypoint's -180..180 longitude), and the planner's own rule for a goal on it: at most half a
+    # cell beyond the outermost centres.
+    grid = (Grid.from_bbox(vehicle_longitudes(box), nx=nx, ny=ny, depths_m=list(base.region.depths_m))
+            if box is not None and nx and ny else None)
     for n, mg in enumerate(goals, start=1):
         if mg.goal.depth_m > deepest + 1e-9:
             raise WaypointError(f"{wpl_path}: item {n}: depth {mg.goal.depth_m:g} m is deeper than the deepest layer "
                                 f"{deepest:g} m of {base_path}")
-        if box is not None and nx and ny:  # cell centres lie on the box's edges: its cells reach half a cell beyond
-            half_lon_deg = (box.east_deg - box.west_deg) / (nx - 1) / 2
-            half_lat_deg = (box.north_deg - box.south_deg) / (ny - 1) / 2
-            g = mg.goal
-            # Longitudes modulo 360 deg: a box written on 0..360 (as HYCOM's regional files are) holds a
-            # waypoint's -180..180 longitude, as planning reads it.
-            east_of_west_deg = (g.lon_deg - (box.west_deg - half_lon_deg)) % 360.0
-            if not (east_of_west_deg <= box.east_deg - box.west_deg + 2 * half_lon_deg
-                    and box.south_deg - half_lat_deg <= g.lat_deg <= box.north_deg + half_lat_deg):
-                raise WaypointError(f"{wpl_path}: item {n}: ({g.lon_deg:g}, {g.lat_deg:g}) lies outside the region "
-                                    f"{box.west_deg:g},{box.south_deg:g},{box.east_deg:g},{box.north_deg:g} of "
-                                    f"{base_path}: no plan could reach it")
+        g = mg.goal
+        if grid is not None and box is not None and grid.nearest_cell(g.lon_deg, g.lat_deg)[2] > 0.5:
+            raise WaypointError(f"{wpl_path}: item {n}: ({g.lon_deg:g}, {g.lat_deg:g}) lies outside the region "
+                                f"{box.west_deg:g},{box.south_deg:g},{box.east_deg:g},{box.north_deg:g} of "
+                                f"{base_path}: no plan could reach it")
     text = replace_goals(base_path.read_text(encoding="utf-8"), goals, base_dir=base_path.parent, out_dir=out.parent)
     with atomic_target(out) as tmp:
         tmp.write_text(text, encoding="utf-8")

@@ -333,3 +333,23 @@ def test_a_base_mission_on_0_to_360_longitudes_takes_waypoints_on_minus_180_to_1
     out = tmp_path / "new.yaml"
     assert _cli(["waypoints", "import", str(wpl), "--mission", str(base), "--out", str(out)]) == 0
     assert "lon_deg: -117.8" in out.read_text()
+
+
+def test_waypoints_the_planner_would_refuse_are_refused_at_import(tmp_path):
+    # A region across 180 deg is planned on the longitudes it is written in (planner.grid.vehicle_longitudes):
+    # a waypoint at 179.9 lies on its grid; one at -179.75 (-180..180, as waypoints are) does not, for the
+    # planner as for the import.
+    from planner.grid import Grid, vehicle_longitudes
+
+    base = _mission_with_goals(tmp_path, "goals: [{lat_deg: 33.4, lon_deg: 180.2, depth_m: 0}]\n")
+    base.write_text(base.read_text().replace("bbox: [-118.26, 33.30, -117.70, 33.70]", "bbox: [179.74, 33.30, 180.30, 33.70]"))
+    mission = load_mission(base)
+    grid = Grid.from_bbox(vehicle_longitudes(mission.region.bbox), nx=mission.region.nx, ny=mission.region.ny,
+                          depths_m=list(mission.region.depths_m))
+    assert grid.nearest_cell(179.9, 33.4)[2] <= 0.5 < grid.nearest_cell(-179.75, 33.4)[2]
+    out = tmp_path / "new.yaml"
+    on = write_wpl(tmp_path / "on.waypoints", goals_to_items((goal(33.4, 179.9, 0.0),), **HOME))
+    assert _cli(["waypoints", "import", str(on), "--mission", str(base), "--out", str(out)]) == 0
+    across = write_wpl(tmp_path / "across.waypoints", goals_to_items((goal(33.4, -179.75, 0.0),), **HOME))
+    with pytest.raises(WaypointError, match=r"across.waypoints: item 1: \(-179.75, 33.4\) lies outside the region"):
+        _cli(["waypoints", "import", str(across), "--mission", str(base), "--out", str(tmp_path / "x.yaml")])
