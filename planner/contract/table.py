@@ -108,6 +108,10 @@ class PolicyTable:
     # is the first slice. Empty and None for a stationary plan.
     slice_times: tuple[str, ...] = ()
     slices: NDArray[np.uint8] | None = field(default=None, repr=False)
+    # Optional, time-varying plans: each slice's forecast current, the mean over each layer's water cells
+    # (T, L, 2: east, north, m/s, to the cm/s), from which the executive fits the tide's timing
+    # (``planner.contract.tide_timing``). None: the plan is looked up at the vehicle's own UTC time.
+    slice_current_m_s: NDArray[np.float64] | None = field(default=None, repr=False)
     # Where the plan expects the vehicle to go from the start it was planned with (``lrauv plan
     # --start``): (lon, lat) vertices, the real start first (spec section 5's nominal outcomes; for
     # a physical plan the most likely ones). Shown on the vehicle's map; empty when not planned.
@@ -131,6 +135,12 @@ class PolicyTable:
             self.slices.setflags(write=False)
         elif self.slice_times:
             raise TableError("table slices: slice times without slices")
+        if self.slice_current_m_s is not None:
+            expected = (self.n_slices, len(self.depth_m), 2)
+            if self.slices is None or self.slice_current_m_s.shape != expected:
+                raise TableError(f"table slice currents: expected {expected} for a time-varying table; got "
+                                 f"{self.slice_current_m_s.shape}{'' if self.slices is not None else ' on a stationary one'}")
+            self.slice_current_m_s.setflags(write=False)
         dx_m, dy_m = cell_size_m(self.lat_deg, self.dlon_deg, self.dlat_deg)
         bearings = bearings_deg(dx_m, dy_m)
         bearings.setflags(write=False)
@@ -190,11 +200,15 @@ class PolicyTable:
         )
 
     # -- time -----------------------------------------------------------------------
-    def with_slices(self, times_utc: tuple[str, ...], actions: NDArray[np.uint8]) -> PolicyTable:
-        """This table made time-varying: slice ``n`` (actions ``(L, ny, nx, 8)``) holds around ``times_utc[n]``."""
+    def with_slices(self, times_utc: tuple[str, ...], actions: NDArray[np.uint8],
+                    current_m_s: NDArray[np.float64] | None = None) -> PolicyTable:
+        """This table made time-varying: slice ``n`` (actions ``(L, ny, nx, 8)``) holds around ``times_utc[n]``;
+        ``current_m_s`` (T, L, 2), each slice's mean current per layer, lets the vehicle fit the tide's timing."""
         stack = np.ascontiguousarray(actions, dtype=np.uint8)
         _slice_unix_s(times_utc, "slice times")  # ISO 8601 UTC, increasing
-        return replace(self, actions=np.ascontiguousarray(stack[0]), slices=stack, slice_times=tuple(times_utc))
+        current = None if current_m_s is None else np.round(np.asarray(current_m_s, dtype=np.float64) * 100.0) / 100.0
+        return replace(self, actions=np.ascontiguousarray(stack[0]), slices=stack, slice_times=tuple(times_utc),
+                       slice_current_m_s=current)
 
     @property
     def time_varying(self) -> bool:
@@ -219,7 +233,7 @@ class PolicyTable:
             return self
         view = self._views[index]
         if view is None:
-            view = replace(self, actions=self.slices[index], slices=None, slice_times=())
+            view = replace(self, actions=self.slices[index], slices=None, slice_times=(), slice_current_m_s=None)
             view.__dict__["crc32"] = self.crc32
             self._views[index] = view
         return view
@@ -387,7 +401,11 @@ class PolicyTable:
         if self.physical is not None:  # optional: paper tables keep the bytes they always had
             out["physical"] = {part: dict(values) for part, values in self.physical.items()}
         if self.slices is not None:  # version 2 only
-            out["time"] = {"slices_utc": list(self.slice_times), "lookup": "nearest"}
+            time_part: dict[str, Any] = {"slices_utc": list(self.slice_times), "lookup": "nearest"}
+            out["time"] = time_part
+            if self.slice_current_m_s is not None:  # optional; older readers never saw it
+                time_part["current_cm_s"] = [[[round(float(c) * 100.0) for c in layer] for layer in when]
+                                               for when in self.slice_current_m_s]
         if self.nominal_path:  # optional: a table planned without a start keeps the bytes it always had
             out["nominal_path"] = {"lon_lat_deg": [list(point) for point in self.nominal_path]}
         return out
@@ -640,6 +658,8 @@ def _header_fields(header: Any) -> dict[str, Any]:
         if _key(time_part, "lookup", "time") != "nearest":
             raise TableError(f"time.lookup: expected \"nearest\"; got {time_part['lookup']!r}"[:200])
         fields["slice_times"] = tuple(times)
+        if "current_cm_s" in time_part:  # optional; older readers never saw it
+            fields["slice_current_m_s"] = _slice_current(time_part["current_cm_s"], len(times), len(depths))
     if "nominal_path" in top:  # optional; older readers never saw it
         fields["nominal_path"] = _lon_lat_points(_key(_section(top["nominal_path"], "nominal_path"), "lon_lat_deg",
                                                       "nominal_path"), "nominal_path.lon_lat_deg")
@@ -656,6 +676,24 @@ def _header_fields(header: Any) -> dict[str, Any]:
 
 
 MAX_PATH_POINTS = 10_000
+
+
+def _slice_current(value: Any, n_slices: int, n_layers: int) -> NDArray[np.float64]:
+    """``time.current_cm_s``: per slice, per layer, [east, north] as whole cm/s."""
+    key = "time.current_cm_s"
+    if not isinstance(value, list) or len(value) != n_slices:
+        raise TableError(f"{key}: expected one entry per slice ({n_slices}); got {repr(value)[:80]}")
+    out = np.empty((n_slices, n_layers, 2))
+    for n, when in enumerate(value):
+        if not isinstance(when, list) or len(when) != n_layers:
+            raise TableError(f"{key}[{n}]: expected one [east, north] per layer ({n_layers}); got {repr(when)[:80]}")
+        for l, pair in enumerate(when):
+            if not isinstance(pair, list) or len(pair) != 2:
+                raise TableError(f"{key}[{n}][{l}]: expected [east, north] in cm/s; got {repr(pair)[:80]}")
+            out[n, l] = [_int(pair[0], f"{key}[{n}][{l}][0]"), _int(pair[1], f"{key}[{n}][{l}][1]")]
+    return out / 100.0
+
+
 
 
 def _lon_lat_points(value: Any, key: str) -> tuple[tuple[float, float], ...]:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import lzma
 import math
+import re
 import subprocess
 import sys
 import zlib
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -309,3 +312,40 @@ def test_a_nominal_path_round_trips_and_a_bad_one_is_refused(demo_plan):
 
         with pytest.raises(TableError, match=message):
             PolicyTable.from_bytes(_rewritten(data, header=header), name="t.lrpt")
+
+
+def test_a_time_varying_table_carries_its_slices_currents_to_the_cm_s(timed):
+    L = timed.n_layers
+    current = np.linspace(-0.834, 0.917, 3 * L * 2).reshape(3, L, 2)
+    table = timed.with_slices(HOURS, timed.slices, current)
+    back = PolicyTable.from_bytes(table.to_bytes())
+    assert back.slice_current_m_s is not None
+    assert np.allclose(back.slice_current_m_s, np.round(current, 2)) and np.allclose(back.slice_current_m_s, current, atol=0.005)
+    assert back.header()["time"]["current_cm_s"][0][0] == [round(current[0, 0, 0] * 100), round(current[0, 0, 1] * 100)]
+    assert back.to_bytes() == table.to_bytes()
+    assert back.slice_table(1).slice_current_m_s is None  # a slice is a stationary plan
+    assert "current_cm_s" not in timed.header()["time"]  # without them, the bytes they always had
+
+
+@pytest.mark.parametrize("bad, key", [
+    (lambda c: c[:2], "time.current_cm_s"),
+    (lambda c: [c[0], c[1], c[2][:1]] if len(c[2]) > 1 else [c[0], c[1], []], "time.current_cm_s[2]"),
+    (lambda c: [c[0], c[1], [[1.5, 0]] + c[2][1:]], "time.current_cm_s[2][0][0]"),
+    (lambda c: [c[0], c[1], [[1]] + c[2][1:]], "time.current_cm_s[2][0]"),
+])
+def test_bad_slice_currents_are_refused_by_name(timed, bad, key):
+    table = timed.with_slices(HOURS, timed.slices, np.zeros((3, timed.n_layers, 2)))
+
+    def header(h):  # type: ignore[no-untyped-def]
+        h["time"]["current_cm_s"] = bad(h["time"]["current_cm_s"])
+        return h
+
+    with pytest.raises(TableError, match=re.escape(key)):
+        PolicyTable.from_bytes(_rewritten(table.to_bytes(), header=header))
+
+
+def test_slice_currents_need_a_time_varying_table_of_their_shape(demo_plan, timed):
+    with pytest.raises(TableError, match="slice currents"):
+        replace(demo_plan.table, slice_current_m_s=np.zeros((1, demo_plan.table.n_layers, 2)))
+    with pytest.raises(TableError, match="slice currents"):
+        timed.with_slices(HOURS, timed.slices, np.zeros((2, timed.n_layers, 2)))
