@@ -411,7 +411,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     )
 
     pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical",
-                                  "time_varying", "horizon_h", "slice_h"})
+                                  "time_varying", "horizon_h", "slice_h", "timing_correction"})
     model = pl.choice("model", MODEL_OPTIONS, "paper")
     criterion_text = pl.text("criterion", "robust")
     if criterion_text not in CRITERIA[model]:
@@ -430,6 +430,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     time_varying = pl.boolean("time_varying", False)
     if time_varying and model != "physical":
         raise doc.error("planning.time_varying", f"needs planning.model physical (its transitions carry durations); got {model!r}")
+    timing_correction = pl.boolean("timing_correction", False)
     settings = PlanSettings(
         model=model,
         criterion=criterion,
@@ -441,6 +442,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         time_varying=time_varying,
         horizon_h=pl.number("horizon_h", 72.0, minimum=1, unit="h"),
         slice_h=pl.number("slice_h", minimum=0.01, unit="h") if pl.has("slice_h") else None,
+        timing_correction=timing_correction,
         error_measured=_measured(pl),
     )
 

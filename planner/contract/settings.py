@@ -159,12 +159,19 @@ class PlanSettings:
     time_varying: bool = False
     horizon_h: float = 72.0
     slice_h: float | None = None  # hours between slices, a multiple of the forecast's step; None: every step
+    # A time-varying table that carries each slice's mean current, so that the vehicle fits the tide's
+    # timing to the current it meets and looks its slices up that much earlier or later
+    # (planner.contract.tide_timing); False: slices at the vehicle's own UTC time. A stationary plan has no
+    # slices to shift: there it changes nothing.
+    timing_correction: bool = False
     # ``physical.current_error_m_s`` measured from the data (planner.forecast.error) rather than given.
     error_measured: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.time_varying, bool):
             raise ContractError(f"time_varying: expected true or false; got {self.time_varying!r}")
+        if not isinstance(self.timing_correction, bool):
+            raise ContractError(f"timing_correction: expected true or false; got {self.timing_correction!r}")
         if self.time_varying and self.model != "physical":
             raise ContractError(f"time_varying: needs the physical model (its transitions carry durations); got model {self.model!r}")
         if isinstance(self.horizon_h, bool) or not (isinstance(self.horizon_h, int | float) and math.isfinite(self.horizon_h)

@@ -46,6 +46,7 @@ def line_of(path: Path, needle: str) -> int:
         ("cruise_speed_m_s: 1.0", "cruise_speed_m_s: fast", "vehicle.cruise_speed_m_s", "expected a number"),
         ("bbox: [-118.26, 33.30, -117.70, 33.70]", "bbox: [-117.70, 33.30, -118.26, 33.70]", "region.bbox", "WEST < EAST"),
         ("min_battery_pct: 10", "min_battery_pct: 150", "safety.min_battery_pct", "expected at most 100 %; got 150"),
+        ("criterion: robust", "criterion: robust\n  timing_correction: often", "planning.timing_correction", "true or false"),
     ],
 )
 def test_errors_name_file_line_and_key(tmp_path, old, new, key, message):
@@ -77,3 +78,8 @@ def test_too_many_goals(tmp_path):
     path.write_text(text[:start] + "goals:\n" + goals + text[end:])
     with pytest.raises(MissionError, match="at most 1000 goals; got 10000"):
         load_mission(path)
+
+
+def test_the_tidal_evaluation_fits_the_tides_timing():
+    mission = load_mission(REPO / "missions" / "eval-tidal.yaml")
+    assert mission.settings.timing_correction and not mission.settings.time_varying  # the evaluation plans it varying

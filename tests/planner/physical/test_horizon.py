@@ -220,3 +220,24 @@ def test_replay_plans_a_time_varying_table_again_from_its_header(gyre_file, tmp_
                                                                 depths_m=(0.0, 5.0)))
     with pytest.raises(ShoreError, match=r"actions that differ from the table"):
         plan_again(table, other)
+
+
+def test_with_timing_correction_the_table_carries_each_slices_mean_current(gyre_file):
+    from planner.pipeline import layer_mean_current, make_plan
+
+    plain = make_plan(gyre_request(gyre_file, horizon_h=2.0)).table
+    assert plain.slice_current_m_s is None  # off by default: the bytes a time-varying table always had
+    result = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True))
+    table = PolicyTable.from_bytes(result.table.to_bytes())
+    assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (3, 2, 2)
+    assert np.array_equal(table.slices, plain.slices)  # the plan is the same; only the lookup may shift
+    # Slice 0's is the mean of the planning grid's water currents, to the cm/s.
+    assert np.allclose(table.slice_current_m_s[0], layer_mean_current(result.u_m_s, result.v_m_s), atol=0.005)
+
+
+def test_the_mean_current_of_a_layer_skips_land_and_a_layer_of_land_is_still():
+    from planner.pipeline import layer_mean_current
+
+    u = np.array([[[0.2, np.nan], [0.4, 0.6]], [[np.nan, np.nan], [np.nan, np.nan]]])
+    v = np.array([[[0.1, 0.3], [np.nan, -0.1]], [[np.nan, np.nan], [np.nan, np.nan]]])
+    assert np.allclose(layer_mean_current(u, v), [[0.4, 0.0], [0.0, 0.0]])  # nodes with both components: (0,0), (1,1)
