@@ -25,7 +25,7 @@ from typing import Any
 
 from executive import mavlink_bridge as bridge
 from executive import envelope, goal_tables, ground_station, parameters, plausibility, timeline
-from executive import signing
+from executive import signing, tide_watch
 from executive.clock import VehicleClock
 from executive.helm import HEARTBEAT_PHASES, HelmConfig, HelmState, rebooted, resume_text, resumed, step
 from executive.latency import LatencyHistogram
@@ -164,6 +164,7 @@ class Executive(PlanChanges, StationLink):
         self.swaps: list[dict[str, Any]] = []  # every swap's log record, for the summary and tests
         self._unix_offset_s: float | None = None  # SYSTEM_TIME: unix time = vehicle time + offset
         self.timeline = timeline.Timeline()  # the slice of a time-varying plan the last decision used
+        self.tide = tide_watch.TideWatch()  # the current met and the tide's timing fitted to it
         self._work_dir = config.work_dir or config.log_path.with_name(config.log_path.stem + "-work")
         self.uploads = Uploads(accept_goals=self._accept_goals, accept_file=self._accept_file,
                                flying=self._flying, set_current=self._set_current,
@@ -405,6 +406,7 @@ class Executive(PlanChanges, StationLink):
             self._last_time.clear()
             self._jumped_s = 0.0
             self._unix_offset_s = None  # relative to the old boot: UTC is unknown until the next SYSTEM_TIME
+            self.tide = tide_watch.TideWatch(clock=self.tide.clock, table_crc32=self.tide.table_crc32)  # no command yet
         now_s = self.clock.now_s(wall)
         if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
             return False
@@ -441,8 +443,18 @@ class Executive(PlanChanges, StationLink):
             self._log(self._record_state, now_s, self.vehicle, msg)
         if kind in bridge.DECISION_MESSAGES or (kind == "HEARTBEAT" and self.helm.phase in HEARTBEAT_PHASES):
             self._tick(now_s if t_boot is None else t_boot, link_ok=True)
+            if kind == "GLOBAL_POSITION_INT":  # after the decision: a new shift holds from the next one on, as logged
+                self._measure_current(now_s if t_boot is None else t_boot, msg, fresh=self.vehicle.position_s == t_boot)
             return kind in bridge.DECISION_MESSAGES
         return False
+
+    def _measure_current(self, now_s: float, msg: Any, *, fresh: bool) -> None:
+        # GLOBAL_POSITION_INT's ground velocity: vx north, vy east, cm/s.
+        self.tide, event = tide_watch.measured(self.tide, self.table, self.vehicle, now_s,
+                                               timeline.utc_s(now_s, self._unix_offset_s), msg.vx / 100.0,
+                                               msg.vy / 100.0, fresh=fresh)
+        if event is not None:
+            self._event(now_s, event)
 
     def _record_rx(self, now_s: float, msg: Any, note: Mapping[str, Any] | None = None) -> None:
         self.recorder.write(Topic.MAVLINK_RX, now_s, {**bridge.describe(msg), **(note or {})})
@@ -474,8 +486,9 @@ class Executive(PlanChanges, StationLink):
             self._swap(now_s)  # the decision boundary: a new plan is used whole, from this decision on
         # A time-varying plan: the slice that holds at the vehicle's UTC time (a stationary one is its own slice).
         table = self.table
-        followed = None if table is None else timeline.follow(self.timeline, table,
-                                                              timeline.utc_s(now_s, self._unix_offset_s))
+        utc = timeline.utc_s(now_s, self._unix_offset_s)
+        followed = None if table is None else timeline.follow(
+            self.timeline, table, None if utc is None else utc + self.tide.shift_for(table))
         current = None if followed is None else followed.current
         tick = step(self.helm, self.vehicle, None if current is None else current.table, self.helm_config,
                     now_s=now_s, link_ok=link_ok)
@@ -523,6 +536,7 @@ class Executive(PlanChanges, StationLink):
         msg = bridge.encode(self.mav, cmd, time_boot_ms=int(now_s * 1000) & 0xFFFFFFFF,
                             target_system=self.config.autopilot_system)
         self._send(now_s, msg)
+        self.tide = tide_watch.commanded(self.tide, cmd, now_s)
         self._log(self._record_command, now_s, cmd)
 
     def _record_command(self, now_s: float, cmd: Command) -> None:

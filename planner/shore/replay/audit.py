@@ -31,7 +31,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from executive import mavlink_bridge as bridge
-from executive import plausibility, timeline
+from executive import plausibility, tide_watch, timeline
 from planner.shore.replay.divelog import DiveLog, LogMessage
 from planner.shore.replay.summary import slices_text
 from executive.helm import (
@@ -121,6 +121,7 @@ class _Audit:
     swaps: int = 0
     unix_offset_s: float | None = None  # SYSTEM_TIME, as the loop holds it: UTC = vehicle time + offset
     gate: plausibility.Gate = field(default_factory=plausibility.Gate)  # the telemetry checks' state
+    shift: tuple[int, float] | None = None  # the tide's timing the loop logged: (table CRC, s) (executive.tide_watch)
 
     def run_due(self) -> None:
         """Run the tick the last message called for.
@@ -132,7 +133,9 @@ class _Audit:
             return
         now_s, link_ok = self.due
         self.due = None
-        current = None if self.table is None else self.table.slice_at(timeline.utc_s(now_s, self.unix_offset_s))
+        utc = timeline.utc_s(now_s, self.unix_offset_s)
+        shift = self.shift[1] if self.table is not None and self.shift is not None and self.shift[0] == self.table.crc32 else 0.0
+        current = None if self.table is None else self.table.slice_at(None if utc is None else utc + shift)
         t = step(self.helm, self.vehicle, None if current is None else current.table, self.config, now_s=now_s,
                  link_ok=link_ok)
         if t.decision is not None:
@@ -258,6 +261,8 @@ def audit(dive: DiveLog, *, meter: Progress = SILENT) -> AuditResult:
             elif text.startswith(_REBOOT):
                 state.vehicle, state.helm, state.last_time = VehicleState(), rebooted(state.helm), {}
                 state.unix_offset_s, state.gate = None, plausibility.Gate()
+            elif tide_watch.logged_shift(text) is not None:
+                state.shift = tide_watch.logged_shift(text)
             elif text.startswith(OPERATOR_RESUME):
                 state.helm = resumed(state.helm, clear_stop="safety stop" in text)
         elif m.topic is Topic.DECISION:

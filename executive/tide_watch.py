@@ -1,0 +1,97 @@
+"""The current the vehicle meets, measured onboard, and the tide's timing fitted to it.
+
+A time-varying table that carries its slices' currents (``PolicyTable.slice_current_m_s``) lets
+the vehicle look its slices up earlier or later than its UTC time, by as much as the current it
+meets runs behind or ahead of the forecast (``planner.contract.tide_timing``, docs/time-varying.md).
+
+The current is measured as the ground velocity GLOBAL_POSITION_INT reports less the through-water
+velocity the helm commands (``VelocityYaw``; a depth hold commands none), and only once a command
+has been held for ``SETTLE_S``, so the vehicle has reached it. While the helm holds a position or
+sends nothing, nothing is measured. On an autopilot whose velocity targets are over ground (a real
+ArduSub's GUIDED mode), only the depth holds (DRIFT) measure the current; the rest measure zero and
+the fit then finds nothing it can accept, so the plan is looked up at UTC itself.
+
+Pure: ``commanded`` and ``measured`` take and return frozen values; the loop (``executive.loop``)
+logs the event ``measured`` returns, and the decision audit (``planner.shore.replay.audit``)
+applies the shift that event names from the same decision on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from executive.state import Command, DepthTarget, Event, PositionTarget, VehicleState, VelocityYaw
+from planner.contract import tide_timing
+from planner.contract.table import PolicyTable
+
+SETTLE_S = 30.0  # a 0.5 m/s vehicle reaches its commanded velocity within seconds; a turn within tens
+SAME_M_S = 0.01  # a command repeated within this is the same command
+# The event that says which shift the decisions use from here on, for the audit to read back.
+SHIFT_PREFIX = "tide timing: table "
+
+
+@dataclass(frozen=True, slots=True)
+class TideWatch:
+    """The tide's clock, the through-water velocity the helm last commanded (None: none, or a position
+    hold) and since when, and the table the clock's shift was fitted for."""
+
+    clock: tide_timing.TideClock = tide_timing.TideClock()
+    water_ne_m_s: tuple[float, float] | None = None
+    since_s: float = 0.0
+    table_crc32: int | None = None
+
+    def shift_for(self, table: PolicyTable | None) -> float:
+        """The shift (s) at which ``table``'s slices are looked up: the fitted one for that table, else 0."""
+        return self.clock.shift_s if table is not None and table.crc32 == self.table_crc32 else 0.0
+
+
+def commanded(watch: TideWatch, cmd: Command, now_s: float) -> TideWatch:
+    """``watch`` after the helm sent ``cmd``."""
+    if isinstance(cmd, VelocityYaw):
+        water: tuple[float, float] | None = (cmd.north_m_s, cmd.east_m_s)
+    elif isinstance(cmd, DepthTarget):
+        water = (0.0, 0.0)
+    elif isinstance(cmd, PositionTarget):
+        water = None
+    else:
+        return watch  # modes, arming and message rates say nothing of the velocity
+    old = watch.water_ne_m_s
+    if water is not None and old is not None and abs(water[0] - old[0]) < SAME_M_S and abs(water[1] - old[1]) < SAME_M_S:
+        return watch
+    return TideWatch(watch.clock, water, now_s, watch.table_crc32)
+
+
+def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState, now_s: float, utc_s: float | None,
+             ground_north_m_s: float, ground_east_m_s: float, *, fresh: bool) -> tuple[TideWatch, Event | None]:
+    """``watch`` after one ground velocity at vehicle time ``now_s``, and the event that announces a new shift;
+    ``fresh``: the message's position passed the telemetry checks (a rejected one measures nothing)."""
+    if (table is None or table.slice_current_m_s is None or utc_s is None or watch.water_ne_m_s is None
+            or now_s - watch.since_s < SETTLE_S or not fresh
+            or vehicle.lat_deg is None or vehicle.lon_deg is None or vehicle.depth_m is None):
+        return watch, None
+    cell = table.locate(vehicle.lat_deg, vehicle.lon_deg, vehicle.depth_m)
+    if cell is None or not (math.isfinite(ground_north_m_s) and math.isfinite(ground_east_m_s)):
+        return watch, None
+    clock = watch.clock
+    if watch.table_crc32 != table.crc32:  # another plan: its own reference, fitted afresh on the record so far
+        clock = tide_timing.TideClock(record=clock.record)
+    north, east = watch.water_ne_m_s
+    after = tide_timing.advance(clock, utc_s, cell[0], ground_east_m_s - east, ground_north_m_s - north,
+                                table.slice_unix_s, table.slice_current_m_s)
+    new = TideWatch(after, watch.water_ne_m_s, watch.since_s, table.crc32)
+    if after.shift_s == watch.shift_for(table) or after.last_fit is None:
+        return new, None
+    return new, Event("info", f"{SHIFT_PREFIX}{table.crc32:08x} looked up at UTC {after.shift_s:+.0f} s: "
+                              f"{after.last_fit.describe()}")
+
+
+def logged_shift(text: str) -> tuple[int, float] | None:
+    """(table CRC, shift s) of a logged ``measured`` event, or None for any other text."""
+    if not text.startswith(SHIFT_PREFIX):
+        return None
+    try:
+        crc, rest = text[len(SHIFT_PREFIX):].split(" looked up at UTC ", 1)
+        return int(crc, 16), float(rest.split(" s:", 1)[0])
+    except ValueError:
+        return None

@@ -1,0 +1,120 @@
+"""The tide's timing fitted onboard: the current met, the shift, and the slices looked up with it.
+
+The pure part (``executive.tide_watch``) on its own; the loop's part with a real ``Executive`` fed
+parsed MAVLink messages in this thread, as in test_timeline.py, and its log audited.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from executive import tide_watch  # noqa: E402
+from executive.state import DepthTarget, PositionTarget, SetMode, VehicleState, VelocityYaw  # noqa: E402
+from planner.contract.actions import Action  # noqa: E402
+from planner.contract.modes import SubMode  # noqa: E402
+from planner.contract.table import PolicyTable  # noqa: E402
+from planner.shore.replay.audit import audit  # noqa: E402
+from planner.shore.replay.divelog import open_dive  # noqa: E402
+from tests.executive.test_timeline import Vehicle, _everywhere, _log  # noqa: E402
+
+M2_S = 12.42 * 3600.0
+HOURS = 13
+T0 = 1_768_435_200.0  # 2026-01-15T00:00:00Z
+LATE_S = 3600.0  # the truth's tide runs an hour behind the forecast's
+
+
+def forecast_current(t: float) -> float:
+    return 0.6 * math.sin(2 * math.pi * (t - T0) / M2_S)
+
+
+@pytest.fixture(scope="module")
+def tidal(demo_plan) -> PolicyTable:
+    """Hourly slices, DRIFT in even ones and FORWARD in odd ones, with an eastward M2 current in every layer."""
+    base = demo_plan.table
+    times = tuple(time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(T0 + 3600.0 * n)) for n in range(HOURS))
+    stack = np.stack([_everywhere(base, Action.DRIFT if n % 2 == 0 else Action.FORWARD) for n in range(HOURS)])
+    current = np.zeros((HOURS, base.n_layers, 2))
+    current[:, :, 0] = np.array([forecast_current(T0 + 3600.0 * n) for n in range(HOURS)])[:, None]
+    return PolicyTable.from_bytes(base.with_slices(times, stack, current).to_bytes())
+
+
+def test_commands_say_which_velocity_is_through_the_water() -> None:
+    w = tide_watch.commanded(tide_watch.TideWatch(), VelocityYaw(0.3, 0.4, 0.0, 90.0), 5.0)
+    assert (w.water_ne_m_s, w.since_s) == ((0.3, 0.4), 5.0)
+    assert tide_watch.commanded(w, VelocityYaw(0.305, 0.4, 0.0, 91.0), 9.0) is w  # the same command again
+    assert tide_watch.commanded(w, SetMode(SubMode.GUIDED), 9.0) is w
+    d = tide_watch.commanded(w, DepthTarget(5.0), 9.0)
+    assert (d.water_ne_m_s, d.since_s) == ((0.0, 0.0), 9.0)
+    assert tide_watch.commanded(d, PositionTarget(1.0, 2.0, 3.0), 10.0).water_ne_m_s is None
+
+
+def test_nothing_is_measured_before_the_command_settles_or_without_slice_currents(tidal, demo_plan) -> None:
+    lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
+    vehicle = VehicleState(time_s=40.0, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=40.0)
+    w = tide_watch.commanded(tide_watch.TideWatch(), DepthTarget(0.0), 20.0)
+    assert tide_watch.measured(w, tidal, vehicle, 40.0, T0 + 40.0, 0.1, 0.2, fresh=True)[0] is w  # 20 s: not settled
+    assert tide_watch.measured(w, tidal, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=False)[0] is w  # a rejected position
+    assert tide_watch.measured(w, tidal, vehicle, 60.0, None, 0.1, 0.2, fresh=True)[0] is w  # no UTC
+    assert tide_watch.measured(w, demo_plan.table, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=True)[0] is w
+    after, event = tide_watch.measured(w, tidal, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=True)
+    assert after.table_crc32 == tidal.crc32 and event is None
+
+
+def test_the_logged_shift_reads_back() -> None:
+    assert tide_watch.logged_shift("tide timing: table 0000abcd looked up at UTC -3600 s: the current ...") == (0xABCD, -3600.0)
+    assert tide_watch.logged_shift("plan swapped") is None
+
+
+def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal, tmp_path) -> None:
+    """The vehicle drifts (DRIFT) and moves (FORWARD, a velocity east) with the truth's current, an hour
+    behind the forecast's; once the record spans enough of the tide, the slices are looked up an hour
+    earlier, the log says so, and the audit finds every decision where the loop made it."""
+    v = Vehicle(tidal, tmp_path / "exec.mcap")
+    feed = v._feed
+    water = [0.0, 0.0]
+
+    def position(dt_s: float) -> None:
+        v.time_ms += round(dt_s * 1000)
+        now = T0 + v.time_ms / 1000.0
+        j, i = (int(x) for x in np.argwhere(tidal.water[0])[len(np.argwhere(tidal.water[0])) // 2])
+        lat, lon = tidal.cell_centre(j, i)
+        east = forecast_current(now - LATE_S) + water[1]  # ground = the current met + through the water
+        feed(v.mav.global_position_int_encode(v.time_ms, round(lat * 1e7), round(lon * 1e7), 0, 0,
+                                              round(water[0] * 100), round(east * 100), 0,
+                                              round(tidal.bearing_deg(j, 0) * 100) % 36000))
+
+    try:
+        v.time_ms = 0
+        v.heartbeat()
+        v.system_time(T0)  # UTC at boot: the first slice's time
+        for _ in range(int(5 * 3600 / 20)):  # five hours, a position every 20 s
+            position(20.0)
+            water[:] = _commanded(v)
+    finally:
+        v.close()
+    decisions, _, events = _log(tmp_path / "exec.mcap")
+    shifts = [text for _, text in events if text.startswith(tide_watch.SHIFT_PREFIX)]
+    assert shifts, "the tide's timing was never fitted"
+    first = tide_watch.logged_shift(shifts[0])
+    assert first is not None and first[0] == tidal.crc32 and first[1] == pytest.approx(-LATE_S, abs=900)
+    last = tide_watch.logged_shift(shifts[-1])
+    assert last is not None and last[1] == pytest.approx(-LATE_S, abs=300)
+    # After the fit, each decision uses the slice nearest UTC less an hour.
+    late = [d for d in decisions if d["time_s"] > 4.5 * 3600]
+    assert late and all(d["slice"] == round((d["time_s"] - LATE_S) / 3600.0) for d in late)
+    result = audit(open_dive(tmp_path / "exec.mcap"))
+    assert result.clean and result.timed == len(decisions)
+
+
+def _commanded(v: Vehicle) -> list[float]:
+    """The through-water velocity the executive last commanded (north, east): what the vehicle then flies."""
+    w = v.executive.tide.water_ne_m_s
+    return [0.0, 0.0] if w is None else [w[0], w[1]]
