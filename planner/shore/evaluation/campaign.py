@@ -249,7 +249,7 @@ def run_one(campaign: Campaign, method: str, index: int) -> RunResult:
             steps = [s for s in sol.nominal(state) if s.action not in (Action.AT_GOAL, Action.UNREACHABLE)]
             pilot = OpenLoopPilot(steps, table, params)
         else:
-            pilot = FeedbackPilot(plan.table_at, params)
+            pilot = FeedbackPilot(plan.table_at, params, timing=plan.schedule[0][1] if method == "time-varying" else None)
     outcome, t, energy = fly(pilot, spec.truth, start, params, campaign.referee, dt_s=spec.dt_s,
                              max_time_s=spec.max_time_s, time_offset_s=campaign.time_offset_s)
     return RunResult(method=method, start=index, outcome=outcome, time_s=t, energy_wh=energy, predicted_wh=predicted,

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Literal, Protocol, get_args
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.contract import tide_timing
 from planner.contract.actions import Action
 from planner.contract.errors import ShoreError
 from planner.contract.steering import SteeringKind, is_complete, steer
@@ -108,8 +109,13 @@ class FeedbackPilot:
     """
 
     def __init__(self, table_at: Callable[[float], PolicyTable], params: VehicleParams,
-                 cell_margin: float = CELL_MARGIN) -> None:
+                 cell_margin: float = CELL_MARGIN, timing: PolicyTable | None = None) -> None:
         self._table_at = table_at
+        # A time-varying table with its slices' currents: fit the tide's timing to the current met, as the
+        # executive does (planner.contract.tide_timing), and look its slices up that much earlier or later.
+        self._timing = timing if timing is not None and timing.slice_current_m_s is not None else None
+        self._clock = tide_timing.TideClock()
+        self._next_measure_s = 0.0
         self._params = params
         self._margin = cell_margin
         self._held: tuple[Setpoint, Callable[[Body], bool]] | None = None
@@ -118,8 +124,14 @@ class FeedbackPilot:
         self._setpoint: Setpoint | None = None
         self._table: PolicyTable | None = None
 
+    @property
+    def shift_s(self) -> float:
+        return self._clock.shift_s
+
     def command(self, body: Body) -> Setpoint | str:
-        table = self._table_at(body.time_s)
+        if self._timing is not None and body.time_s >= self._next_measure_s:
+            self._measure(body)
+        table = self._table_at(body.time_s + self._clock.shift_s)
         if table is not self._table:
             # The next slice of a time-varying plan (the same file): decide again now, as the helm does on
             # every update, keeping the held cell and manoeuvre. A new plan: decide afresh, as the helm
@@ -151,6 +163,23 @@ class FeedbackPilot:
         if completed is not None:
             self._held = (sp, completed)
         return sp
+
+
+    def _measure(self, body: Body) -> None:
+        """One measurement of the current every ``MEASURE_S``: over ground less through the water (the truth's
+        own, here; the executive's from its telemetry and its command)."""
+        timing = self._timing
+        assert timing is not None and timing.slice_current_m_s is not None
+        self._next_measure_s = body.time_s + MEASURE_S
+        cell = timing.locate(body.lat_deg, body.lon_deg, body.depth_m)
+        if cell is None:
+            return
+        self._clock = tide_timing.advance(
+            self._clock, timing.slice_unix_s[0] + body.time_s, cell[0], body.ground_east_m_s - body.water_east_m_s,
+            body.ground_north_m_s - body.water_north_m_s, timing.slice_unix_s, timing.slice_current_m_s)
+
+
+MEASURE_S = 10.0  # the evaluation's pilot measures the current every 10 s of vehicle time
 
 
 def realise(action: Action, state: tuple[int, int, int, int], table: PolicyTable, body: Body,
