@@ -133,8 +133,10 @@ _POLICY = _lrauv("lrauv.Policy", "A policy table the executive loaded, swapped i
     "goal": _OBJ,
     "model": _STR_OR_NULL,
     "criterion": _STR_OR_NULL,
-    # time-varying tables only: how many slices, the first's and the last's UTC time
-    "slices": {"type": "object", "properties": {"count": _INT, "first_utc": _STR, "last_utc": _STR}},
+    # time-varying tables only: how many slices, the first's and the last's UTC time, and (when the table
+    # carries its slices' currents) that the tide's timing is fitted onboard
+    "slices": {"type": "object", "properties": {"count": _INT, "first_utc": _STR, "last_utc": _STR,
+                                                "timing_correction": {"type": "boolean"}}},
 })
 
 _MAVLINK = _lrauv("lrauv.MavlinkMessage", "One MAVLink message as received or sent", {

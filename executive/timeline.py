@@ -94,4 +94,8 @@ def decision_record(decision: Decision, current: TimeSlice | None) -> dict[str, 
 
 def slices_record(table: PolicyTable) -> dict[str, Any]:
     """A time-varying table's slices in a policy record: how many, the first's and the last's UTC time."""
-    return {"count": table.n_slices, "first_utc": table.slice_times[0], "last_utc": table.slice_times[-1]}
+    record: dict[str, Any] = {"count": table.n_slices, "first_utc": table.slice_times[0],
+                              "last_utc": table.slice_times[-1]}
+    if table.slice_current_m_s is not None:  # the tide's timing is fitted onboard (executive.tide_watch)
+        record["timing_correction"] = True
+    return record

@@ -17,6 +17,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from executive import tide_watch  # noqa: E402
+from executive.recorder import Topic  # noqa: E402
 from executive.state import DepthTarget, PositionTarget, SetMode, VehicleState, VelocityYaw  # noqa: E402
 from planner.contract.actions import Action  # noqa: E402
 from planner.contract.modes import SubMode  # noqa: E402
@@ -112,6 +113,10 @@ def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal
     assert late and all(d["slice"] == round((d["time_s"] - LATE_S) / 3600.0) for d in late)
     result = audit(open_dive(tmp_path / "exec.mcap"))
     assert result.clean and result.timed == len(decisions)
+    assert result.time_varying == (f"{tidal.crc32:08x}: time-varying, {HOURS} slices from 2026-01-15T00:00:00Z to "
+                                   "2026-01-15T12:00:00Z, the tide's timing fitted onboard",)
+    policy = [m.payload for m in open_dive(tmp_path / "exec.mcap").messages([Topic.POLICY])]
+    assert policy[0]["slices"]["timing_correction"] is True
 
 
 def _commanded(v: Vehicle) -> list[float]:

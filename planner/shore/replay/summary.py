@@ -237,7 +237,9 @@ def status_text_lines(autopilot: AutopilotLog, *, most: int = 8) -> list[str]:
 
 def slices_text(slices: Mapping[str, Any]) -> str:
     """A time-varying table's slices as a policy record gives them (``executive.timeline.slices_record``)."""
-    return f"time-varying, {slices.get('count')} slices from {slices.get('first_utc')} to {slices.get('last_utc')}"
+    fitted = ", the tide's timing fitted onboard" if slices.get("timing_correction") else ""
+    return (f"time-varying, {slices.get('count')} slices from {slices.get('first_utc')} to "
+            f"{slices.get('last_utc')}{fitted}")
 
 
 def _h(seconds: float) -> str:
