@@ -82,8 +82,9 @@ def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState,
     new = TideWatch(after, watch.water_ne_m_s, watch.since_s, table.crc32)
     if after.shift_s == watch.shift_for(table) or after.last_fit is None:
         return new, None
-    return new, Event("info", f"{SHIFT_PREFIX}{table.crc32:08x} looked up at UTC {after.shift_s:+.0f} s: "
-                              f"{after.last_fit.describe()}")
+    fit = after.last_fit
+    why = fit.describe() if fit.accepted else f"the forecast's current no longer explains the current met ({fit.describe()})"
+    return new, Event("info", f"{SHIFT_PREFIX}{table.crc32:08x} looked up at UTC {after.shift_s:+.0f} s: {why}")
 
 
 def logged_shift(text: str) -> tuple[int, float] | None:

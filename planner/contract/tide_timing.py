@@ -73,8 +73,9 @@ class TimingFit:
 
     def describe(self) -> str:
         late = "behind" if self.shift_s < 0 else "ahead of"
-        return (f"the current met runs {abs(self.shift_s) / 60:.0f} min {late} the forecast (scale {self.scale:.2f}, "
-                f"r2 {self.r2:.2f} over {self.span_s / 3600:.1f} h, {self.observations} minutes)")
+        best = "" if self.accepted else "at best "
+        return (f"the current met runs {best}{abs(self.shift_s) / 60:.0f} min {late} the forecast (scale "
+                f"{self.scale:.2f}, r2 {self.r2:.2f} over {self.span_s / 3600:.1f} h, {self.observations} minutes)")
 
 
 def observe(record: CurrentRecord, unix_s: float, layer: int, east_m_s: float, north_m_s: float) -> CurrentRecord:
@@ -155,12 +156,17 @@ class TideClock:
 
 def advance(clock: TideClock, unix_s: float, layer: int, east_m_s: float, north_m_s: float,
             slice_unix_s: tuple[float, ...] | NDArray[np.float64], current_m_s: NDArray[np.float64]) -> TideClock:
-    """``clock`` after one measurement of the current; every ``REFIT_S`` the shift is fitted again, and an
-    accepted fit replaces it (a fit that is not accepted leaves the last accepted shift: too little record
-    says nothing new)."""
+    """``clock`` after one measurement of the current; every ``REFIT_S`` the shift is fitted again. An
+    accepted fit replaces it. A fit over enough record that is not accepted sets it back to none: the
+    forecast's current, shifted, no longer explains the current met (a vehicle gone where the layer's
+    mean says little of its own current). A fit over too little record (measurements paused, the record
+    thinned out) leaves the last shift: it says nothing new."""
     record = observe(clock.record, unix_s, layer, east_m_s, north_m_s)
     if unix_s < clock.next_fit_unix_s:
         return TideClock(record, clock.shift_s, clock.last_fit, clock.next_fit_unix_s)
     result = fit(record, slice_unix_s, current_m_s)
-    shift = result.shift_s if result is not None and result.accepted else clock.shift_s
+    if result is None or (not result.accepted and result.span_s < MIN_SPAN_S):
+        shift = clock.shift_s
+    else:
+        shift = result.shift_s if result.accepted else 0.0
     return TideClock(record, shift, result if result is not None else clock.last_fit, unix_s + REFIT_S)

@@ -123,3 +123,22 @@ def _commanded(v: Vehicle) -> list[float]:
     """The through-water velocity the executive last commanded (north, east): what the vehicle then flies."""
     w = v.executive.tide.water_ne_m_s
     return [0.0, 0.0] if w is None else [w[0], w[1]]
+
+
+def test_a_shift_the_current_no_longer_supports_is_withdrawn_and_logged(tidal) -> None:
+    lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
+    w = tide_watch.commanded(tide_watch.TideWatch(), DepthTarget(0.0), 0.0)
+    events = []
+    rng = np.random.default_rng(3)
+    for n in range(int(9 * 3600 / 20)):  # four hours of the late tide, then five of a current it does not explain
+        t = 60.0 + 20.0 * n
+        vehicle = VehicleState(time_s=t, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=t)
+        east = forecast_current(T0 + t - LATE_S) if t < 4 * 3600 else float(rng.normal(0.0, 0.4))
+        north = 0.0 if t < 4 * 3600 else float(rng.normal(0.0, 0.4))
+        w, event = tide_watch.measured(w, tidal, vehicle, t, T0 + t, north, east, fresh=True)
+        if event is not None:
+            events.append(event.text)
+    shifts = [tide_watch.logged_shift(text) for text in events]
+    assert shifts[0] is not None and shifts[0][1] == pytest.approx(-LATE_S, abs=900)
+    assert shifts[-1] == (tidal.crc32, 0.0) and "no longer explains" in events[-1]
+    assert w.shift_for(tidal) == 0.0

@@ -86,15 +86,33 @@ def test_an_impossible_current_is_not_recorded() -> None:
     assert tt.observe(rec, T0 + 1.0, 0, 60.0, 0.0) is rec
 
 
-def test_a_later_fit_that_is_not_accepted_keeps_the_last_accepted_shift() -> None:
+def test_a_current_that_stops_following_the_forecast_sets_the_shift_back_to_none() -> None:
     times, current = reference()
     clock = record(4.0)
-    assert clock.shift_s != 0.0
-    t = T0 + 4 * 3600.0
-    for n in range(int(7 * 3600 / 10)):  # a current that stops following the forecast
-        clock = tt.advance(clock, t + 10.0 * n, 0, 0.3 * (-1) ** n, 0.0, times, current)
-    assert clock.last_fit is not None and not clock.last_fit.accepted
     assert clock.shift_s == pytest.approx(-3600.0, abs=tt.STEP_S)
+    t = T0 + 4 * 3600.0
+    rng = np.random.default_rng(1)
+    shifts = []
+    for n in range(int(7 * 3600 / 10)):  # somewhere whose current the layer's mean does not describe
+        clock = tt.advance(clock, t + 10.0 * n, 0, float(rng.normal(0.0, 0.3)), float(rng.normal(0.0, 0.3)), times,
+                           current)
+        shifts.append(clock.shift_s)
+    assert clock.last_fit is not None and not clock.last_fit.accepted and clock.last_fit.span_s >= tt.MIN_SPAN_S
+    assert clock.shift_s == 0.0
+    assert shifts[0] != 0.0  # it took a record that no longer fits, not the first odd minute
+
+
+def test_a_record_emptied_by_a_pause_keeps_the_last_shift_until_it_spans_enough_again() -> None:
+    times, current = reference()
+    clock = record(4.0)
+    shift = clock.shift_s
+    assert shift != 0.0
+    t = T0 + 10.5 * 3600.0  # no measurement for six and a half hours (a position hold): the old record is gone
+    for n in range(int(1800 / 10)):
+        east, north = met(t + 10.0 * n, 3600.0, 0.8)
+        clock = tt.advance(clock, t + 10.0 * n, 0, east, north, times, current)
+    assert clock.last_fit is not None and clock.last_fit.span_s < tt.MIN_SPAN_S and not clock.last_fit.accepted
+    assert clock.shift_s == shift
 
 
 def test_the_record_keeps_the_last_window_only() -> None:
