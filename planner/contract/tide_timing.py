@@ -13,12 +13,11 @@ that minute's measurements, so one bad measurement never decides; a fit over the
 ``WINDOW_S`` chooses the shift ``tau`` (and a scale ``a``, the vehicle's place against the
 layer's mean) minimising ``sum |obs(t) - a ref(t + tau)|^2``. Each shift is judged by the share of
 the observations' variance it explains (R^2) over the observations whose shifted time lies within
-the slices; the best is used only when it explains ``MIN_R2`` over a long enough span
-(``MIN_SPAN_S``), with its shift inside the search range, not on
-its edge.
-Otherwise the shift is none and the plan is looked up at the vehicle's own UTC time.
+the slices; the best is accepted only when it explains ``MIN_R2`` over at least ``MIN_SPAN_S`` of
+record, with its shift inside the search range, not on its edge. Until then the plan is looked up
+at the vehicle's own UTC time (``advance`` says when an accepted shift is withdrawn).
 
-Pure: ``observe`` and ``fit`` take and return frozen values.
+Pure: ``observe``, ``fit`` and ``advance`` take and return frozen values.
 """
 
 from __future__ import annotations
@@ -36,6 +35,7 @@ MIN_SPAN_S = 2.0 * 3600.0  # a sixth of a semi-diurnal tide: its timing shows, w
 MIN_R2 = 0.8
 BIN_S = 60.0
 MAX_CURRENT_M_S = 5.0  # a measurement above this is not an ocean current (the fastest tidal races are near 5 m/s)
+REFIT_S = 600.0  # the shift is fitted again every 10 minutes of record
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,8 +140,6 @@ def _median(values: tuple[float, ...]) -> float:
     n = len(s)
     return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
 
-
-REFIT_S = 600.0  # the shift is fitted again every 10 minutes of record
 
 
 @dataclass(frozen=True, slots=True)

@@ -124,14 +124,11 @@ class FeedbackPilot:
         self._setpoint: Setpoint | None = None
         self._table: PolicyTable | None = None
 
-    @property
-    def shift_s(self) -> float:
-        return self._clock.shift_s
-
     def command(self, body: Body) -> Setpoint | str:
+        shift_s = self._clock.shift_s  # as in the executive: a shift fitted now holds from the next decision
         if self._timing is not None and body.time_s >= self._next_measure_s:
             self._measure(body)
-        table = self._table_at(body.time_s + self._clock.shift_s)
+        table = self._table_at(body.time_s + shift_s)
         if table is not self._table:
             # The next slice of a time-varying plan (the same file): decide again now, as the helm does on
             # every update, keeping the held cell and manoeuvre. A new plan: decide afresh, as the helm
