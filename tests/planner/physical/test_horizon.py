@@ -189,6 +189,7 @@ def test_lrauv_plan_time_varying_writes_the_slices(gyre_file, tmp_path, capsys):
     assert main(cmd) == 0
     printed = capsys.readouterr().out
     assert "x 3 time slices" in printed and "slices     3 slices, 2026-01-15T00:00:00Z to 2026-01-15T02:00:00Z" in printed
+    assert "timing     " not in printed
     assert PolicyTable.load(out).n_slices == 3
     assert main(cmd + ["--horizon-h", "0.2"]) == 2
     err = capsys.readouterr().err
@@ -241,3 +242,20 @@ def test_the_mean_current_of_a_layer_skips_land_and_a_layer_of_land_is_still():
     u = np.array([[[0.2, np.nan], [0.4, 0.6]], [[np.nan, np.nan], [np.nan, np.nan]]])
     v = np.array([[[0.1, 0.3], [np.nan, -0.1]], [[np.nan, np.nan], [np.nan, np.nan]]])
     assert np.allclose(layer_mean_current(u, v), [[0.4, 0.0], [0.0, 0.0]])  # nodes with both components: (0,0), (1,1)
+
+
+def test_lrauv_plan_of_the_tidal_mission_carries_the_slices_currents_and_says_so(tmp_path, capsys):
+    from planner.cli import main
+    from planner.forecast.synthetic.tidal import TidalSettings, write_tidal
+    from tests.support import REPO
+
+    forecast = write_tidal(tmp_path / "tidal.nc", TidalSettings())
+    out = tmp_path / "tidal.lrpt"
+    assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
+                 "--horizon-h", "3", "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert "timing     each slice's mean current per layer carried" in printed
+    table = PolicyTable.load(out)
+    assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (4, 1, 2)
+    # The channel's flood runs east along it: the mean current of the first slice is eastward and strong.
+    assert table.slice_current_m_s[0, 0, 0] > 0.2
