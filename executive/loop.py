@@ -452,7 +452,8 @@ class Executive(PlanChanges, StationLink):
         # GLOBAL_POSITION_INT's ground velocity: vx north, vy east, cm/s.
         self.tide, event = tide_watch.measured(self.tide, self.table, self.vehicle, now_s,
                                                timeline.utc_s(now_s, self._unix_offset_s), msg.vx / 100.0,
-                                               msg.vy / 100.0, fresh=fresh)
+                                               msg.vy / 100.0, fresh=fresh,
+                                               running=self.helm.phase is Phase.RUNNING)
         if event is not None:
             self._event(now_s, event)
 

@@ -5,9 +5,10 @@ the vehicle look its slices up earlier or later than its UTC time, by as much as
 meets runs behind or ahead of the forecast (``planner.contract.tide_timing``, docs/time-varying.md).
 
 The current is measured as the ground velocity GLOBAL_POSITION_INT reports less the through-water
-velocity the helm commands (``VelocityYaw``; a depth hold commands none), and only once a command
-has been held for ``SETTLE_S``, so the vehicle has reached it. While the helm holds a position or
-sends nothing, nothing is measured. On an autopilot whose velocity targets are over ground (a real
+velocity the helm commands (``VelocityYaw``; a depth hold, ALT_HOLD, commands none), and only once a command
+has been held for ``SETTLE_S``, so the vehicle has reached it, and only while the helm runs the
+plan (a person, a failsafe or a safety stop that takes over leaves the velocity unknown until the
+helm commands one again). While the helm holds a position, nothing is measured. On an autopilot whose velocity targets are over ground (a real
 ArduSub's GUIDED mode), only the depth holds (DRIFT) measure the current; the rest measure zero and
 the fit then finds nothing it can accept, so the plan is looked up at UTC itself.
 
@@ -21,8 +22,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from executive.state import Command, DepthTarget, Event, PositionTarget, VehicleState, VelocityYaw
+from executive.state import Command, DepthTarget, Event, PositionTarget, SetMode, VehicleState, VelocityYaw
 from planner.contract import tide_timing
+from planner.contract.modes import SubMode
 from planner.contract.table import PolicyTable
 
 SETTLE_S = 30.0  # a 0.5 m/s vehicle reaches its commanded velocity within seconds; a turn within tens
@@ -50,10 +52,12 @@ def commanded(watch: TideWatch, cmd: Command, now_s: float) -> TideWatch:
     """``watch`` after the helm sent ``cmd``."""
     if isinstance(cmd, VelocityYaw):
         water: tuple[float, float] | None = (cmd.north_m_s, cmd.east_m_s)
-    elif isinstance(cmd, DepthTarget):
-        water = (0.0, 0.0)
+    elif isinstance(cmd, DepthTarget) or (isinstance(cmd, SetMode) and cmd.mode is SubMode.ALT_HOLD):
+        water = (0.0, 0.0)  # a depth hold (DRIFT: ALT_HOLD, no horizontal thrust)
     elif isinstance(cmd, PositionTarget):
         water = None
+    elif isinstance(cmd, SetMode) and cmd.mode is not SubMode.GUIDED:
+        water = None  # surfacing, or a mode that steers by itself: what the vehicle does through the water is unknown
     else:
         return watch  # modes, arming and message rates say nothing of the velocity
     old = watch.water_ne_m_s
@@ -63,9 +67,15 @@ def commanded(watch: TideWatch, cmd: Command, now_s: float) -> TideWatch:
 
 
 def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState, now_s: float, utc_s: float | None,
-             ground_north_m_s: float, ground_east_m_s: float, *, fresh: bool) -> tuple[TideWatch, Event | None]:
+             ground_north_m_s: float, ground_east_m_s: float, *, fresh: bool,
+             running: bool) -> tuple[TideWatch, Event | None]:
     """``watch`` after one ground velocity at vehicle time ``now_s``, and the event that announces a new shift;
-    ``fresh``: the message's position passed the telemetry checks (a rejected one measures nothing)."""
+    ``fresh``: the message's position passed the telemetry checks (a rejected one measures nothing);
+    ``running``: the helm runs the plan (else the velocity through the water is no longer the command's)."""
+    if not running:
+        if watch.water_ne_m_s is None:
+            return watch, None
+        return TideWatch(watch.clock, None, now_s, watch.table_crc32), None
     if (table is None or table.slice_current_m_s is None or utc_s is None or watch.water_ne_m_s is None
             or now_s - watch.since_s < SETTLE_S or not fresh
             or vehicle.lat_deg is None or vehicle.lon_deg is None or vehicle.depth_m is None):
@@ -80,10 +90,22 @@ def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState,
     after = tide_timing.advance(clock, utc_s, cell[0], ground_east_m_s - east, ground_north_m_s - north,
                                 table.slice_unix_s, table.slice_current_m_s)
     new = TideWatch(after, watch.water_ne_m_s, watch.since_s, table.crc32)
-    if after.shift_s == watch.shift_for(table) or after.last_fit is None:
+    # Logged whenever what the log last said no longer holds: a new shift for this table, or another
+    # table while the last logged shift (of the table before) was not none. The audit keeps one
+    # (table, shift) as this does, so it looks up the same slices.
+    if watch.table_crc32 == table.crc32:
+        changed = after.shift_s != watch.clock.shift_s
+    else:
+        changed = after.shift_s != 0.0 or watch.clock.shift_s != 0.0
+    if not changed:
         return new, None
     fit = after.last_fit
-    why = fit.describe() if fit.accepted else f"the forecast's current no longer explains the current met ({fit.describe()})"
+    if fit is None or (not fit.accepted and after.shift_s == 0.0 and watch.table_crc32 != table.crc32):
+        why = "another plan: none until a fit of its own"
+    elif fit.accepted:
+        why = fit.describe()
+    else:
+        why = f"the forecast's current no longer explains the current met ({fit.describe()})"
     return new, Event("info", f"{SHIFT_PREFIX}{table.crc32:08x} looked up at UTC {after.shift_s:+.0f} s: {why}")
 
 

@@ -9,12 +9,13 @@ UTC time at which the plan's slices are looked up.
 
 The reference is a time-varying table's per-slice current (``PolicyTable.slice_current_m_s``: the
 mean over each layer's water cells). Observations are at most one a minute, each the median of
-that minute's measurements, so one bad measurement never decides; a fit over the last
+that minute's measurements (at least ``MIN_BIN_SAMPLES``), so one bad measurement never decides; a fit over the last
 ``WINDOW_S`` chooses the shift ``tau`` (and a scale ``a``, the vehicle's place against the
 layer's mean) minimising ``sum |obs(t) - a ref(t + tau)|^2``. Each shift is judged by the share of
 the observations' variance it explains (R^2) over the observations whose shifted time lies within
-the slices; the best is accepted only when it explains ``MIN_R2`` over at least ``MIN_SPAN_S`` of
-record, with its shift inside the search range, not on its edge. Until then the plan is looked up
+the slices; the best is accepted when its observations span at least ``MIN_SPAN_S`` and it
+explains ``MIN_R2`` of them, with a scale within ``SCALE_RANGE`` and its shift inside the search
+range, not on its edge. Until then the plan is looked up
 at the vehicle's own UTC time (``advance`` says when an accepted shift is withdrawn).
 
 Pure: ``observe``, ``fit`` and ``advance`` take and return frozen values.
@@ -34,6 +35,8 @@ WINDOW_S = 6.0 * 3600.0  # half a semi-diurnal tide of record
 MIN_SPAN_S = 2.0 * 3600.0  # a sixth of a semi-diurnal tide: its timing shows, with the plan still hours to run
 MIN_R2 = 0.8
 BIN_S = 60.0
+MIN_BIN_SAMPLES = 3  # a minute of fewer measurements is dropped: its median would be one sample's, or two's mean
+SCALE_RANGE = (0.25, 4.0)  # the current met against the layer's mean: beyond, the fit explains noise, not the tide
 MAX_CURRENT_M_S = 5.0  # a measurement above this is not an ocean current (the fastest tidal races are near 5 m/s)
 REFIT_S = 600.0  # the shift is fitted again every 10 minutes of record
 
@@ -54,6 +57,7 @@ class CurrentRecord:
 
     observations: tuple[Observation, ...] = ()
     bin_start_s: float | None = None
+    bin_last_s: float | None = None
     bin_layer: int = -1
     bin_east: tuple[float, ...] = ()
     bin_north: tuple[float, ...] = ()
@@ -67,9 +71,10 @@ class TimingFit:
     shift_s: float
     scale: float
     r2: float
-    span_s: float
+    span_s: float  # of the observations this shift was fitted over
     observations: int
     accepted: bool
+    record_span_s: float = 0.0  # of the whole record
 
     def describe(self) -> str:
         late = "behind" if self.shift_s < 0 else "ahead of"
@@ -85,14 +90,15 @@ def observe(record: CurrentRecord, unix_s: float, layer: int, east_m_s: float, n
     if math.hypot(east_m_s, north_m_s) > MAX_CURRENT_M_S:
         return record
     if record.bin_start_s is not None and layer == record.bin_layer and 0.0 <= unix_s - record.bin_start_s < BIN_S:
-        return CurrentRecord(record.observations, record.bin_start_s, layer, record.bin_east + (east_m_s,),
+        return CurrentRecord(record.observations, record.bin_start_s, unix_s, layer, record.bin_east + (east_m_s,),
                              record.bin_north + (north_m_s,))
     observations = record.observations
-    if record.bin_east and record.bin_start_s is not None:
-        observations = (*observations, Observation(record.bin_start_s + BIN_S / 2.0, record.bin_layer,
+    if len(record.bin_east) >= MIN_BIN_SAMPLES and record.bin_start_s is not None and record.bin_last_s is not None:
+        # Stamped at the middle of its own measurements: a minute cut short (a change of layer) keeps its time.
+        observations = (*observations, Observation(0.5 * (record.bin_start_s + record.bin_last_s), record.bin_layer,
                                                    _median(record.bin_east), _median(record.bin_north)))
     observations = tuple(o for o in observations if unix_s - WINDOW_S <= o.unix_s <= unix_s)
-    return CurrentRecord(observations, unix_s, layer, (east_m_s,), (north_m_s,))
+    return CurrentRecord(observations, unix_s, unix_s, layer, (east_m_s,), (north_m_s,))
 
 
 def fit(record: CurrentRecord, slice_unix_s: tuple[float, ...] | NDArray[np.float64],
@@ -100,9 +106,9 @@ def fit(record: CurrentRecord, slice_unix_s: tuple[float, ...] | NDArray[np.floa
     """The shift that best maps the record onto the reference ``current_m_s`` (slices, layers, east/north) at
     ``slice_unix_s``; None with fewer than two observations."""
     obs = record.observations
-    if len(obs) < 2:
-        return None
     times = np.asarray(slice_unix_s, dtype=np.float64)
+    if len(obs) < 2 or times.size < 2 or not bool(np.all(np.diff(times) > 0)):
+        return None
     t = np.array([o.unix_s for o in obs])
     layer = np.clip(np.array([o.layer for o in obs]), 0, current_m_s.shape[1] - 1)
     o = np.array([[o.east_m_s, o.north_m_s] for o in obs])  # (n, 2)
@@ -126,13 +132,17 @@ def fit(record: CurrentRecord, slice_unix_s: tuple[float, ...] | NDArray[np.floa
     last = np.where(valid > 0, t[None, :], -np.inf).max(axis=1)
     spans = np.where(count > 1, last - first, 0.0)
     r2_all = np.where(count > 1, r2_all, -np.inf)
+    # The best over all shifts, even one that keeps few observations (the rest fall outside the slices,
+    # as early in a plan for the shifts that look back): it is then not accepted, on its short span.
+    # Restricting the choice to shifts with a long record instead biases it towards those that look
+    # forward, which keep more of it (an hour late was fitted 40 minutes late).
     best = int(np.argmax(r2_all))
     r2 = float(r2_all[best]) if math.isfinite(r2_all[best]) else 0.0
     span = float(spans[best])
     accepted = (span >= MIN_SPAN_S and r2 >= MIN_R2 and 0 < best < shifts.size - 1
-                and times.size >= 2 and bool(np.all(np.diff(times) > 0)))
+                and SCALE_RANGE[0] <= float(scale[best]) <= SCALE_RANGE[1])
     return TimingFit(shift_s=float(shifts[best]), scale=float(scale[best]), r2=r2, span_s=span,
-                     observations=int(count[best]), accepted=accepted)
+                     observations=int(count[best]), accepted=accepted, record_span_s=float(t.max() - t.min()))
 
 
 def _median(values: tuple[float, ...]) -> float:
@@ -163,7 +173,7 @@ def advance(clock: TideClock, unix_s: float, layer: int, east_m_s: float, north_
     if unix_s < clock.next_fit_unix_s:
         return TideClock(record, clock.shift_s, clock.last_fit, clock.next_fit_unix_s)
     result = fit(record, slice_unix_s, current_m_s)
-    if result is None or (not result.accepted and result.span_s < MIN_SPAN_S):
+    if result is None or (not result.accepted and result.record_span_s < MIN_SPAN_S):
         shift = clock.shift_s
     else:
         shift = result.shift_s if result.accepted else 0.0

@@ -19,6 +19,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from executive import tide_watch  # noqa: E402
 from executive.recorder import Topic  # noqa: E402
 from executive.state import DepthTarget, PositionTarget, SetMode, VehicleState, VelocityYaw  # noqa: E402
+from planner.contract import tide_timing  # noqa: E402
 from planner.contract.actions import Action  # noqa: E402
 from planner.contract.modes import SubMode  # noqa: E402
 from planner.contract.table import PolicyTable  # noqa: E402
@@ -54,18 +55,20 @@ def test_commands_say_which_velocity_is_through_the_water() -> None:
     assert tide_watch.commanded(w, SetMode(SubMode.GUIDED), 9.0) is w
     d = tide_watch.commanded(w, DepthTarget(5.0), 9.0)
     assert (d.water_ne_m_s, d.since_s) == ((0.0, 0.0), 9.0)
+    assert tide_watch.commanded(w, SetMode(SubMode.ALT_HOLD), 9.0).water_ne_m_s == (0.0, 0.0)  # DRIFT
     assert tide_watch.commanded(d, PositionTarget(1.0, 2.0, 3.0), 10.0).water_ne_m_s is None
+    assert tide_watch.commanded(w, SetMode(SubMode.SURFACE), 10.0).water_ne_m_s is None
 
 
 def test_nothing_is_measured_before_the_command_settles_or_without_slice_currents(tidal, demo_plan) -> None:
     lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
     vehicle = VehicleState(time_s=40.0, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=40.0)
     w = tide_watch.commanded(tide_watch.TideWatch(), DepthTarget(0.0), 20.0)
-    assert tide_watch.measured(w, tidal, vehicle, 40.0, T0 + 40.0, 0.1, 0.2, fresh=True)[0] is w  # 20 s: not settled
-    assert tide_watch.measured(w, tidal, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=False)[0] is w  # a rejected position
-    assert tide_watch.measured(w, tidal, vehicle, 60.0, None, 0.1, 0.2, fresh=True)[0] is w  # no UTC
-    assert tide_watch.measured(w, demo_plan.table, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=True)[0] is w
-    after, event = tide_watch.measured(w, tidal, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=True)
+    assert tide_watch.measured(w, tidal, vehicle, 40.0, T0 + 40.0, 0.1, 0.2, fresh=True, running=True)[0] is w  # 20 s: not settled
+    assert tide_watch.measured(w, tidal, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=False, running=True)[0] is w  # a rejected position
+    assert tide_watch.measured(w, tidal, vehicle, 60.0, None, 0.1, 0.2, fresh=True, running=True)[0] is w  # no UTC
+    assert tide_watch.measured(w, demo_plan.table, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=True, running=True)[0] is w
+    after, event = tide_watch.measured(w, tidal, vehicle, 60.0, T0 + 60.0, 0.1, 0.2, fresh=True, running=True)
     assert after.table_crc32 == tidal.crc32 and event is None
 
 
@@ -80,7 +83,17 @@ def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal
     earlier, the log says so, and the audit finds every decision where the loop made it."""
     v = Vehicle(tidal, tmp_path / "exec.mcap")
     feed = v._feed
-    water = [0.0, 0.0]
+    water = [0.0, 0.0]  # what the vehicle flies through the water: the last velocity sent, none in a depth hold
+    send = v.executive._send_command
+
+    def sent(now_s: float, cmd) -> None:  # type: ignore[no-untyped-def]
+        if isinstance(cmd, VelocityYaw):
+            water[:] = [cmd.north_m_s, cmd.east_m_s]
+        elif isinstance(cmd, DepthTarget) or (isinstance(cmd, SetMode) and cmd.mode is SubMode.ALT_HOLD):
+            water[:] = [0.0, 0.0]
+        send(now_s, cmd)
+
+    v.executive._send_command = sent  # type: ignore[method-assign]
 
     def position(dt_s: float) -> None:
         v.time_ms += round(dt_s * 1000)
@@ -96,9 +109,8 @@ def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal
         v.time_ms = 0
         v.heartbeat()
         v.system_time(T0)  # UTC at boot: the first slice's time
-        for _ in range(int(5 * 3600 / 20)):  # five hours, a position every 20 s
-            position(20.0)
-            water[:] = _commanded(v)
+        for _ in range(int(5 * 3600 / 15)):  # five hours, a position every 15 s
+            position(15.0)
     finally:
         v.close()
     decisions, _, events = _log(tmp_path / "exec.mcap")
@@ -119,11 +131,6 @@ def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal
     assert policy[0]["slices"]["timing_correction"] is True
 
 
-def _commanded(v: Vehicle) -> list[float]:
-    """The through-water velocity the executive last commanded (north, east): what the vehicle then flies."""
-    w = v.executive.tide.water_ne_m_s
-    return [0.0, 0.0] if w is None else [w[0], w[1]]
-
 
 def test_a_shift_the_current_no_longer_supports_is_withdrawn_and_logged(tidal) -> None:
     lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
@@ -135,10 +142,34 @@ def test_a_shift_the_current_no_longer_supports_is_withdrawn_and_logged(tidal) -
         vehicle = VehicleState(time_s=t, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=t)
         east = forecast_current(T0 + t - LATE_S) if t < 4 * 3600 else float(rng.normal(0.0, 0.4))
         north = 0.0 if t < 4 * 3600 else float(rng.normal(0.0, 0.4))
-        w, event = tide_watch.measured(w, tidal, vehicle, t, T0 + t, north, east, fresh=True)
+        w, event = tide_watch.measured(w, tidal, vehicle, t, T0 + t, north, east, fresh=True, running=True)
         if event is not None:
             events.append(event.text)
     shifts = [tide_watch.logged_shift(text) for text in events]
     assert shifts[0] is not None and shifts[0][1] == pytest.approx(-LATE_S, abs=900)
     assert shifts[-1] == (tidal.crc32, 0.0) and "no longer explains" in events[-1]
     assert w.shift_for(tidal) == 0.0
+
+
+def test_another_table_after_a_shift_is_announced_so_the_audit_drops_the_shift_too(tidal) -> None:
+    other = PolicyTable.from_bytes(tidal.with_slices(tidal.slice_times, tidal.slices,
+                                                     tidal.slice_current_m_s * 0.5).to_bytes())
+    assert other.crc32 != tidal.crc32
+    lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
+    vehicle = VehicleState(time_s=100.0, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=100.0)
+    shifted = tide_watch.TideWatch(clock=tide_timing.TideClock(shift_s=-3600.0), water_ne_m_s=(0.0, 0.0), since_s=0.0,
+                                   table_crc32=tidal.crc32)
+    after, event = tide_watch.measured(shifted, other, vehicle, 100.0, T0 + 100.0, 0.0, 0.1, fresh=True, running=True)
+    assert event is not None and tide_watch.logged_shift(event.text) == (other.crc32, 0.0)
+    assert after.shift_for(other) == 0.0 and after.shift_for(tidal) == 0.0
+    # Back to the first table: the log's last word was "none" for the other one, so the audit uses none for it too.
+    back, event = tide_watch.measured(after, tidal, vehicle, 101.0, T0 + 101.0, 0.0, 0.1, fresh=True, running=True)
+    assert event is None and back.shift_for(tidal) == 0.0
+
+
+def test_nothing_is_measured_while_the_helm_does_not_run_the_plan(tidal) -> None:
+    lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
+    vehicle = VehicleState(time_s=100.0, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=100.0)
+    w = tide_watch.commanded(tide_watch.TideWatch(), VelocityYaw(0.0, 0.5, 0.0, 90.0), 0.0)
+    taken, _ = tide_watch.measured(w, tidal, vehicle, 100.0, T0 + 100.0, 0.0, 0.6, fresh=True, running=False)
+    assert taken.water_ne_m_s is None and taken.clock.record == w.clock.record  # overridden: the command is stale

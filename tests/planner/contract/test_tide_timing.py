@@ -116,7 +116,48 @@ def test_a_record_emptied_by_a_pause_keeps_the_last_shift_until_it_spans_enough_
 
 
 def test_the_record_keeps_the_last_window_only() -> None:
-    clock = record(8.0, every_s=30.0)
+    clock = record(8.0, every_s=15.0)
     obs = clock.record.observations
     assert obs[-1].unix_s - obs[0].unix_s <= tt.WINDOW_S
     assert len(obs) == pytest.approx(tt.WINDOW_S / tt.BIN_S, abs=2)
+
+
+def test_a_minute_of_too_few_measurements_is_dropped_so_a_lone_wild_one_withdraws_nothing() -> None:
+    """A wild measurement just before a pause is its minute's only sample: the minute is dropped."""
+    times, current = reference()
+    clock = record(4.0)
+    shift = clock.shift_s
+    assert shift != 0.0
+    t = T0 + 4 * 3600.0
+    clock = tt.advance(clock, t, 0, 3.0, -2.0, times, current)  # then nothing for 90 s
+    t += 90.0
+    for n in range(int(3600 / 10)):
+        east, north = met(t + 10.0 * n, 3600.0, 0.8)
+        clock = tt.advance(clock, t + 10.0 * n, 0, east, north, times, current)
+    assert clock.shift_s == shift
+    assert all(abs(o.east_m_s) < 1.0 for o in clock.record.observations)
+
+
+def test_a_minute_cut_short_by_a_change_of_layer_keeps_its_own_time() -> None:
+    rec = tt.CurrentRecord()
+    for k in range(4):
+        rec = tt.observe(rec, T0 + 10.0 * k, 0, 0.1, 0.0)  # 0 .. 30 s in layer 0
+    rec = tt.observe(rec, T0 + 35.0, 1, 0.2, 0.0)  # layer 1 closes the minute early
+    assert [(o.unix_s, o.layer) for o in rec.observations] == [(T0 + 15.0, 0)]
+
+
+def test_a_fit_that_needs_an_implausible_scale_is_not_accepted() -> None:
+    times, current = reference()
+    clock = tt.TideClock()
+    for t in np.arange(T0, T0 + 4 * 3600.0, 10.0):
+        east, north = met(float(t), 3600.0, 0.1)  # a tenth of the forecast's tide: the layer's mean says little here
+        clock = tt.advance(clock, float(t), 0, east - 0.05 * 0.9, north, times, current)
+    assert clock.last_fit is not None and clock.last_fit.scale < tt.SCALE_RANGE[0]
+    assert not clock.last_fit.accepted and clock.shift_s == 0.0
+
+
+def test_fit_refuses_fewer_than_two_increasing_slices() -> None:
+    clock = record(3.0)
+    times, current = reference()
+    assert tt.fit(clock.record, times[:1], current[:1]) is None
+    assert tt.fit(clock.record, times[::-1], current) is None
