@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Literal, Protocol, get_args
 import numpy as np
 from numpy.typing import NDArray
 
+from executive import tide_watch
 from planner.contract import tide_timing
 from planner.contract.actions import Action
 from planner.contract.errors import ShoreError
@@ -116,6 +117,8 @@ class FeedbackPilot:
         self._timing = timing if timing is not None and timing.slice_current_m_s is not None else None
         self._clock = tide_timing.TideClock()
         self._next_measure_s = 0.0
+        self._water: tuple[float, float] | None = None  # the through-water velocity last commanded (north, east)
+        self._since_s = 0.0
         self._params = params
         self._margin = cell_margin
         self._held: tuple[Setpoint, Callable[[Body], bool]] | None = None
@@ -128,6 +131,12 @@ class FeedbackPilot:
         shift_s = self._clock.shift_s  # as in the executive: a shift fitted now holds from the next decision
         if self._timing is not None and body.time_s >= self._next_measure_s:
             self._measure(body)
+        out = self._decide(body, shift_s)
+        if self._timing is not None and isinstance(out, Setpoint):
+            self._commanded(out, body.time_s)
+        return out
+
+    def _decide(self, body: Body, shift_s: float) -> Setpoint | str:
         table = self._table_at(body.time_s + shift_s)
         if table is not self._table:
             # The next slice of a time-varying plan (the same file): decide again now, as the helm does on
@@ -162,18 +171,28 @@ class FeedbackPilot:
         return sp
 
 
+    def _commanded(self, sp: Setpoint, t_s: float) -> None:
+        """As ``executive.tide_watch.commanded``: a velocity, none in a depth hold, unknown in a position hold."""
+        water = ((sp.north_m_s, sp.east_m_s) if sp.kind is SetpointKind.VELOCITY
+                 else None if sp.kind is SetpointKind.POSITION else (0.0, 0.0))
+        old = self._water
+        if (water is None or old is None or abs(water[0] - old[0]) >= tide_watch.SAME_M_S
+                or abs(water[1] - old[1]) >= tide_watch.SAME_M_S):
+            self._water, self._since_s = water, t_s
+
     def _measure(self, body: Body) -> None:
-        """One measurement of the current every ``MEASURE_S``: over ground less through the water (the truth's
-        own, here; the executive's from its telemetry and its command)."""
+        """One measurement of the current every ``MEASURE_S``, as the executive makes it: the ground velocity
+        less the through-water velocity last commanded, once held ``tide_watch.SETTLE_S``."""
         timing = self._timing
         assert timing is not None and timing.slice_current_m_s is not None
         self._next_measure_s = body.time_s + MEASURE_S
         cell = timing.locate(body.lat_deg, body.lon_deg, body.depth_m)
-        if cell is None:
+        if cell is None or self._water is None or body.time_s - self._since_s < tide_watch.SETTLE_S:
             return
+        north, east = self._water
         self._clock = tide_timing.advance(
-            self._clock, timing.slice_unix_s[0] + body.time_s, cell[0], body.ground_east_m_s - body.water_east_m_s,
-            body.ground_north_m_s - body.water_north_m_s, timing.slice_unix_s, timing.slice_current_m_s)
+            self._clock, timing.slice_unix_s[0] + body.time_s, cell[0], body.ground_east_m_s - east,
+            body.ground_north_m_s - north, timing.slice_unix_s, timing.slice_current_m_s)
 
 
 MEASURE_S = 10.0  # the evaluation's pilot measures the current every 10 s of vehicle time

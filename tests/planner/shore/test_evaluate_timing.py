@@ -8,7 +8,7 @@ import pytest
 from planner.contract.vehicle import VehicleParams
 from planner.shore.evaluation.runs import FeedbackPilot
 from tests.executive.test_tide_watch import LATE_S, T0, forecast_current, tidal  # noqa: F401 (a fixture)
-from vehicle_sim.dynamics import Body
+from vehicle_sim.dynamics import Body, Setpoint, SetpointKind
 
 
 def _fly(table, timing) -> list[int]:  # type: ignore[no-untyped-def]
@@ -22,10 +22,14 @@ def _fly(table, timing) -> list[int]:  # type: ignore[no-untyped-def]
     pilot = FeedbackPilot(table_at, VehicleParams(), timing=timing)
     lat, lon = table.cell_centre(*(int(x) for x in np.argwhere(table.water[0])[0]))
     seen = []
+    water = (0.0, 0.0)  # the vehicle flies the pilot's last velocity through the water, none in a depth hold
     for n in range(5 * 60 * 6):
         t = 10.0 * n
         east = forecast_current(T0 + t - LATE_S)
-        pilot.command(Body(time_s=t, lat_deg=lat, lon_deg=lon, depth_m=0.0, ground_east_m_s=east))
+        sp = pilot.command(Body(time_s=t, lat_deg=lat, lon_deg=lon, depth_m=0.0, ground_north_m_s=water[0],
+                                ground_east_m_s=east + water[1], water_north_m_s=water[0], water_east_m_s=water[1]))
+        assert isinstance(sp, Setpoint)
+        water = (sp.north_m_s, sp.east_m_s) if sp.kind is SetpointKind.VELOCITY else (0.0, 0.0)
         if n % 6 == 0:
             seen.append(table.slice_at(T0 + asked[-1]).index)
     return seen
