@@ -487,9 +487,8 @@ class Executive(PlanChanges, StationLink):
             self._swap(now_s)  # the decision boundary: a new plan is used whole, from this decision on
         # A time-varying plan: the slice that holds at the vehicle's UTC time (a stationary one is its own slice).
         table = self.table
-        utc = timeline.utc_s(now_s, self._unix_offset_s)
         followed = None if table is None else timeline.follow(
-            self.timeline, table, None if utc is None else utc + self.tide.shift_for(table))
+            self.timeline, table, timeline.utc_s(now_s, self._unix_offset_s), self.tide.shift_for(table))
         current = None if followed is None else followed.current
         tick = step(self.helm, self.vehicle, None if current is None else current.table, self.helm_config,
                     now_s=now_s, link_ok=link_ok)

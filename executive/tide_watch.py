@@ -5,12 +5,13 @@ the vehicle look its slices up earlier or later than its UTC time, by as much as
 meets runs behind or ahead of the forecast (``planner.contract.tide_timing``, docs/time-varying.md).
 
 The current is measured as the ground velocity GLOBAL_POSITION_INT reports less the through-water
-velocity the helm commands (``VelocityYaw``; a depth hold, ALT_HOLD, commands none), and only once a command
-has been held for ``SETTLE_S``, so the vehicle has reached it, and only while the helm runs the
-plan (a person, a failsafe or a safety stop that takes over leaves the velocity unknown until the
-helm commands one again). While the helm holds a position, nothing is measured. On an autopilot whose velocity targets are over ground (a real
-ArduSub's GUIDED mode), only the depth holds (DRIFT) measure the current; the rest measure zero and
-the fit then finds nothing it can accept, so the plan is looked up at UTC itself.
+velocity the helm commands (``VelocityYaw``; a depth hold, ALT_HOLD, commands none), only once a
+command has been held for ``SETTLE_S``, so the vehicle has reached it, and only while the helm runs
+the plan (a person, a failsafe or a safety stop that takes over leaves the velocity unknown until
+the helm commands one again). While the helm holds a position, nothing is measured. On an autopilot
+whose velocity targets are over ground (a real ArduSub's GUIDED mode), only the depth holds (DRIFT)
+measure the current; the rest measure zero and the fit then finds nothing it can accept, so the
+plan is looked up at UTC itself.
 
 Pure: ``commanded`` and ``measured`` take and return frozen values; the loop (``executive.loop``)
 logs the event ``measured`` returns, and the decision audit (``planner.shore.replay.audit``)
@@ -60,10 +61,14 @@ def commanded(watch: TideWatch, cmd: Command, now_s: float) -> TideWatch:
         water = None  # surfacing, or a mode that steers by itself: what the vehicle does through the water is unknown
     else:
         return watch  # modes, arming and message rates say nothing of the velocity
-    old = watch.water_ne_m_s
-    if water is not None and old is not None and abs(water[0] - old[0]) < SAME_M_S and abs(water[1] - old[1]) < SAME_M_S:
+    if same_velocity(water, watch.water_ne_m_s):
         return watch
     return TideWatch(watch.clock, water, now_s, watch.table_crc32)
+
+
+def same_velocity(a: tuple[float, float] | None, b: tuple[float, float] | None) -> bool:
+    """Two commanded through-water velocities that are the same command (a repeat): within ``SAME_M_S``."""
+    return a is not None and b is not None and abs(a[0] - b[0]) < SAME_M_S and abs(a[1] - b[1]) < SAME_M_S
 
 
 def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState, now_s: float, utc_s: float | None,

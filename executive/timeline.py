@@ -50,22 +50,29 @@ def iso_utc(unix_s: float) -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(unix_s))
 
 
-def follow(timeline: Timeline, table: PolicyTable, unix_s: float | None) -> Followed:
-    """The slice of ``table`` that holds at ``unix_s``, and what to log if it differs from the last one used."""
-    current = table.slice_at(unix_s)
+def slice_for(table: PolicyTable, unix_s: float | None, shift_s: float = 0.0) -> TimeSlice:
+    """The slice of ``table`` at the vehicle's UTC ``unix_s``, looked up ``shift_s`` later (the tide's timing
+    fitted onboard, ``executive.tide_watch``; negative: earlier)."""
+    return table.slice_at(None if unix_s is None else unix_s + shift_s)
+
+
+def follow(timeline: Timeline, table: PolicyTable, unix_s: float | None, shift_s: float = 0.0) -> Followed:
+    """The slice of ``table`` that holds at ``unix_s`` (``slice_for``), and what to log if it differs from the
+    last one used."""
+    current = slice_for(table, unix_s, shift_s)
     if not table.time_varying:
         return Followed(current, timeline)
     if timeline.table_crc32 != table.crc32:  # another table: its slice is announced afresh
         timeline = Timeline(table_crc32=table.crc32)
     if (current.index, current.status) == (timeline.index, timeline.status):
         return Followed(current, timeline)
-    event = _announce(table, current, unix_s, timeline.warned_past)
+    event = _announce(table, current, unix_s, shift_s, timeline.warned_past)
     warned = timeline.warned_past or current.status == "past_horizon"
     return Followed(current, Timeline(table_crc32=table.crc32, index=current.index, status=current.status,
                                       warned_past=warned), (event,))
 
 
-def _announce(table: PolicyTable, current: TimeSlice, unix_s: float | None, warned_past: bool) -> Event:
+def _announce(table: PolicyTable, current: TimeSlice, unix_s: float | None, shift_s: float, warned_past: bool) -> Event:
     times = table.slice_times
     n = current.index
     if current.status == "in_horizon":
@@ -77,8 +84,9 @@ def _announce(table: PolicyTable, current: TimeSlice, unix_s: float | None, warn
         return Event("warning", f"past the plan's horizon: using the last slice's plan (last slice {times[n]})")
     if current.status == "before_start":
         assert unix_s is not None
+        shifted = f", looked up at UTC {shift_s:+.0f} s" if shift_s else ""
         return Event("warning", f"before the plan's first slice: using the first slice's plan (first slice {times[0]},"
-                                f" vehicle UTC {iso_utc(unix_s)})")
+                                f" vehicle UTC {iso_utc(unix_s)}{shifted})")
     return Event("warning", f"UTC unknown: using the first slice's plan (no SYSTEM_TIME with UTC yet;"
                             f" first slice {times[0]})")
 

@@ -694,8 +694,6 @@ def _slice_current(value: Any, n_slices: int, n_layers: int) -> NDArray[np.float
     return out / 100.0
 
 
-
-
 def _lon_lat_points(value: Any, key: str) -> tuple[tuple[float, float], ...]:
     """A list of [lon, lat] pairs in degrees (at most MAX_PATH_POINTS), each within range."""
     if not isinstance(value, list) or len(value) > MAX_PATH_POINTS:

@@ -9,14 +9,13 @@ UTC time at which the plan's slices are looked up.
 
 The reference is a time-varying table's per-slice current (``PolicyTable.slice_current_m_s``: the
 mean over each layer's water cells). Observations are at most one a minute, each the median of
-that minute's measurements (at least ``MIN_BIN_SAMPLES``), so one bad measurement never decides; a fit over the last
-``WINDOW_S`` chooses the shift ``tau`` (and a scale ``a``, the vehicle's place against the
+that minute's measurements (at least ``MIN_BIN_SAMPLES``), so one bad measurement never decides; a
+fit over the last ``WINDOW_S`` chooses the shift ``tau`` (and a scale ``a``, the vehicle's place against the
 layer's mean) minimising ``sum |obs(t) - a ref(t + tau)|^2``. Each shift is judged by the share of
 the observations' variance it explains (R^2) over the observations whose shifted time lies within
 the slices; the best is accepted when its observations span at least ``MIN_SPAN_S`` and it
 explains ``MIN_R2`` of them, with a scale within ``SCALE_RANGE`` and its shift inside the search
-range, not on its edge. Until then the plan is looked up
-at the vehicle's own UTC time (``advance`` says when an accepted shift is withdrawn).
+range, not on its edge. Until then the plan is looked up at the vehicle's own UTC time (``advance`` says when an accepted shift is withdrawn).
 
 Pure: ``observe``, ``fit`` and ``advance`` take and return frozen values.
 """
@@ -25,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import median
 
 import numpy as np
 from numpy.typing import NDArray
@@ -96,7 +96,7 @@ def observe(record: CurrentRecord, unix_s: float, layer: int, east_m_s: float, n
     if len(record.bin_east) >= MIN_BIN_SAMPLES and record.bin_start_s is not None and record.bin_last_s is not None:
         # Stamped at the middle of its own measurements: a minute cut short (a change of layer) keeps its time.
         observations = (*observations, Observation(0.5 * (record.bin_start_s + record.bin_last_s), record.bin_layer,
-                                                   _median(record.bin_east), _median(record.bin_north)))
+                                                   median(record.bin_east), median(record.bin_north)))
     observations = tuple(o for o in observations if unix_s - WINDOW_S <= o.unix_s <= unix_s)
     return CurrentRecord(observations, unix_s, unix_s, layer, (east_m_s,), (north_m_s,))
 
@@ -143,13 +143,6 @@ def fit(record: CurrentRecord, slice_unix_s: tuple[float, ...] | NDArray[np.floa
                 and SCALE_RANGE[0] <= float(scale[best]) <= SCALE_RANGE[1])
     return TimingFit(shift_s=float(shifts[best]), scale=float(scale[best]), r2=r2, span_s=span,
                      observations=int(count[best]), accepted=accepted, record_span_s=float(t.max() - t.min()))
-
-
-def _median(values: tuple[float, ...]) -> float:
-    s = sorted(values)
-    n = len(s)
-    return s[n // 2] if n % 2 else 0.5 * (s[n // 2 - 1] + s[n // 2])
-
 
 
 @dataclass(frozen=True, slots=True)

@@ -173,3 +173,12 @@ def test_nothing_is_measured_while_the_helm_does_not_run_the_plan(tidal) -> None
     w = tide_watch.commanded(tide_watch.TideWatch(), VelocityYaw(0.0, 0.5, 0.0, 90.0), 0.0)
     taken, _ = tide_watch.measured(w, tidal, vehicle, 100.0, T0 + 100.0, 0.0, 0.6, fresh=True, running=False)
     assert taken.water_ne_m_s is None and taken.clock.record == w.clock.record  # overridden: the command is stale
+
+
+def test_a_slice_looked_up_before_the_first_says_the_vehicles_own_utc_and_the_shift(tidal) -> None:
+    from executive import timeline
+
+    f = timeline.follow(timeline.Timeline(), tidal, T0 + 1800.0, -3600.0)
+    assert f.current.index == 0 and f.current.status == "before_start"
+    assert f.events[0].text.endswith("vehicle UTC 2026-01-15T00:30:00Z, looked up at UTC -3600 s)")
+    assert timeline.slice_for(tidal, T0 + 7200.0, -3600.0).index == 1

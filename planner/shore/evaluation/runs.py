@@ -175,9 +175,7 @@ class FeedbackPilot:
         """As ``executive.tide_watch.commanded``: a velocity, none in a depth hold, unknown in a position hold."""
         water = ((sp.north_m_s, sp.east_m_s) if sp.kind is SetpointKind.VELOCITY
                  else None if sp.kind is SetpointKind.POSITION else (0.0, 0.0))
-        old = self._water
-        if (water is None or old is None or abs(water[0] - old[0]) >= tide_watch.SAME_M_S
-                or abs(water[1] - old[1]) >= tide_watch.SAME_M_S):
+        if not tide_watch.same_velocity(water, self._water):
             self._water, self._since_s = water, t_s
 
     def _measure(self, body: Body) -> None:

@@ -133,9 +133,9 @@ class _Audit:
             return
         now_s, link_ok = self.due
         self.due = None
-        utc = timeline.utc_s(now_s, self.unix_offset_s)
-        shift = self.shift[1] if self.table is not None and self.shift is not None and self.shift[0] == self.table.crc32 else 0.0
-        current = None if self.table is None else self.table.slice_at(None if utc is None else utc + shift)
+        table = self.table
+        shift = self.shift[1] if table is not None and self.shift is not None and self.shift[0] == table.crc32 else 0.0
+        current = None if table is None else timeline.slice_for(table, timeline.utc_s(now_s, self.unix_offset_s), shift)
         t = step(self.helm, self.vehicle, None if current is None else current.table, self.config, now_s=now_s,
                  link_ok=link_ok)
         if t.decision is not None:
