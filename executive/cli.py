@@ -196,7 +196,7 @@ def _exec(args: argparse.Namespace) -> int:
                            "recovered": recovered or ""}
     try:
         executive = Executive(config, plan, table_bytes={t.crc32: b for t, b in zip(tables, blobs)}, metadata=meta,
-                              safety_stop=_safety_stop(resumed))
+                              safety_stop=_safety_stop(resumed), tide=None if resumed is None else resumed.tide)
     except OSError as exc:
         raise ExecutiveError(f"--link {args.link} or --gcs {args.gcs}: cannot open: {exc}") from None
     stop = threading.Event()

@@ -1,7 +1,8 @@
 """The executive's durable state: what it needs to go on after a crash (``kill -9``, power cut).
 
 A state directory holds ``state.json`` (the goals, which table serves each, the
-active goal, the log being written) and the tables themselves under
+active goal, the log being written, the safety stop, and the current met with the tide's timing
+fitted to it: ``executive.tide_watch``) and the tables themselves under
 ``tables/policy-CRC.lrpt``. The loop saves it at start and at every plan swap;
 tables are written before the state that names them, each file atomically
 (``planner.contract.atomic``), so a kill at any moment leaves the previous state or the
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from executive import tide_watch
 from executive.goal_tables import MissionPlan
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import ExecutiveError
@@ -45,6 +47,7 @@ class Resumed:
     mission_path: Path | None
     saved_utc: str
     safety_stop: str | None = None  # the limit that fired (helm Situation value): it holds after a restart
+    tide: tide_watch.TideWatch | None = None  # the current met and the tide's shift (absent in older states)
 
 
 def _table_name(table: PolicyTable) -> str:
@@ -52,8 +55,10 @@ def _table_name(table: PolicyTable) -> str:
 
 
 def save(state_dir: Path, plan: MissionPlan, blobs: Mapping[int, bytes], *, log_path: Path,
-         mission_path: Path | None, safety_stop: str | None = None) -> Path:
-    """Write the tables ``plan`` uses (those not yet there), then ``state.json``; returns its path."""
+         mission_path: Path | None, safety_stop: str | None = None,
+         tide: Mapping[str, Any] | None = None) -> Path:
+    """Write the tables ``plan`` uses (those not yet there), then ``state.json``; returns its path.
+    ``tide``: ``tide_watch.saved``'s record and shift."""
     tables_dir = state_dir / "tables"
     names: list[str | None] = []
     for table in plan.tables:
@@ -75,6 +80,8 @@ def save(state_dir: Path, plan: MissionPlan, blobs: Mapping[int, bytes], *, log_
         "mission": None if mission_path is None else os.fspath(mission_path),
         "safety_stop": safety_stop,
     }
+    if tide is not None:
+        state["tide"] = tide
     return write_atomic(state_dir / STATE_FILE, (json.dumps(state, indent=1) + "\n").encode())
 
 
@@ -124,4 +131,5 @@ def _parse(state: Mapping[str, Any], state_dir: Path, path: Path) -> Resumed:
                    log_path=Path(state["log"]) if state.get("log") else None,
                    mission_path=Path(state["mission"]) if state.get("mission") else None,
                    saved_utc=str(state.get("saved_utc", "")),
-                   safety_stop=str(state["safety_stop"]) if state.get("safety_stop") else None)
+                   safety_stop=str(state["safety_stop"]) if state.get("safety_stop") else None,
+                   tide=tide_watch.restored(state["tide"]) if state.get("tide") else None)

@@ -69,7 +69,7 @@ class ExecConfig:
     replan_on_new_forecast: bool = True
     replan_period_s: float | None = None  # vehicle seconds between replans on the latest forecast
     signing: signing.SigningKey | None = None  # MAVLink 2 signing: required of uploads and commands, used on all we send
-    state_dir: Path | None = None  # durable state for a restart (executive.durable): saved at start and every swap
+    state_dir: Path | None = None  # durable state for a restart (executive.durable): at start, every swap and tide fit
     upload_quota: UploadQuota = field(default_factory=UploadQuota)  # files and bytes uploads may hold (executive.uploads)
     coverage: BBox | None = None  # the mission's planning box: uploaded goals must lie in it (executive.envelope)
 
@@ -102,7 +102,8 @@ class Executive(PlanChanges, StationLink):
 
     def __init__(self, config: ExecConfig, table: PolicyTable | MissionPlan | None, *,
                  table_bytes: Mapping[int, bytes] | None = None,
-                 metadata: dict[str, dict[str, str]] | None = None, safety_stop: Situation | None = None) -> None:
+                 metadata: dict[str, dict[str, str]] | None = None, safety_stop: Situation | None = None,
+                 tide: tide_watch.TideWatch | None = None) -> None:
         from pymavlink import mavutil  # transport classes only; encoding and parsing are the bridge's
 
         self.config = config
@@ -164,7 +165,8 @@ class Executive(PlanChanges, StationLink):
         self.swaps: list[dict[str, Any]] = []  # every swap's log record, for the summary and tests
         self._unix_offset_s: float | None = None  # SYSTEM_TIME: unix time = vehicle time + offset
         self.timeline = timeline.Timeline()  # the slice of a time-varying plan the last decision used
-        self.tide = tide_watch.TideWatch()  # the current met and the tide's timing fitted to it
+        # The current met and the tide's timing fitted to it; a restart keeps them (durable), as a pause in the record.
+        self.tide = tide or tide_watch.TideWatch()
         self._work_dir = config.work_dir or config.log_path.with_name(config.log_path.stem + "-work")
         self.uploads = Uploads(accept_goals=self._accept_goals, accept_file=self._accept_file,
                                flying=self._flying, set_current=self._set_current,
@@ -194,6 +196,9 @@ class Executive(PlanChanges, StationLink):
                 if table_n is not None:
                     self._blobs[table_n.crc32] = blobs.get(table_n.crc32) or table_n.to_bytes()
                     self._record_policy(table_n, self._blobs[table_n.crc32], "loaded", goal_index=index)
+            kept = tide_watch.kept_text(self.tide, self.plan.table)  # before any decision: the audit applies its shift
+            if kept is not None:
+                self._event(0.0, kept)
             self._save_state(0.0)
         else:
             self._event(0.0, Event("error", "no policy table: the vehicle will be surfaced"))
@@ -450,12 +455,15 @@ class Executive(PlanChanges, StationLink):
 
     def _measure_current(self, now_s: float, msg: Any, *, fresh: bool) -> None:
         # GLOBAL_POSITION_INT's ground velocity: vx north, vy east, cm/s.
+        before = self.tide.clock.next_fit_unix_s
         self.tide, event = tide_watch.measured(self.tide, self.table, self.vehicle, now_s,
                                                timeline.utc_s(now_s, self._unix_offset_s), msg.vx / 100.0,
                                                msg.vy / 100.0, fresh=fresh,
                                                running=self.helm.phase is Phase.RUNNING)
         if event is not None:
             self._event(now_s, event)
+        if self.tide.clock.next_fit_unix_s != before:  # fitted again (every 10 minutes): kept for a restart
+            self._log(self._save_state, now_s)
 
     def _record_rx(self, now_s: float, msg: Any, note: Mapping[str, Any] | None = None) -> None:
         self.recorder.write(Topic.MAVLINK_RX, now_s, {**bridge.describe(msg), **(note or {})})
@@ -592,12 +600,14 @@ class Executive(PlanChanges, StationLink):
             self.recorder.attach(f"policy-{table.crc32:08x}.lrpt", table_bytes)
 
     def _save_state(self, now_s: float) -> None:
-        """The durable state (executive.durable): goals, tables, the active goal and the safety stop, for a restart."""
+        """The durable state (executive.durable): goals, tables, the active goal, the safety stop and the tide's
+        record and shift, for a restart."""
         if self.state_writer is None or self.plan is None:
             return
         self.state_writer.save(self.plan, self._blobs, log_path=self.config.log_path,
                                mission_path=self.config.mission_path,
-                               safety_stop=None if self.helm.stop is None else self.helm.stop.value)
+                               safety_stop=None if self.helm.stop is None else self.helm.stop.value,
+                               tide=tide_watch.saved(self.tide))
 
     # -- time-driven work --------------------------------------------------------------------
 

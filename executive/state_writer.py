@@ -1,7 +1,8 @@
 """The durable state written by a thread of its own: a slow or full disk never holds up a decision.
 
 ``executive.durable.save`` writes the goals, tables and safety stop (with fsync) at the start,
-at every plan swap, when the safety stop fires and when an operator resumes. Each save is a
+at every plan swap, when the safety stop fires, when an operator resumes and at every fit of the
+tide's timing (every 10 minutes of its record). Each save is a
 snapshot of frozen values handed to one worker thread, so saves land in order and the newest
 wins; a failure is reported back to the loop (``poll``), which logs and announces it. The
 mission goes on either way: a restart resumes from the last state that was saved.
@@ -13,6 +14,7 @@ from collections.abc import Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from concurrent.futures import wait as wait_for
 from pathlib import Path
+from typing import Any
 
 from executive import durable
 from executive.goal_tables import MissionPlan
@@ -30,10 +32,10 @@ class StateWriter:
         self._pending: list[Future[Path]] = []
 
     def save(self, plan: MissionPlan, blobs: Mapping[int, bytes], *, log_path: Path, mission_path: Path | None,
-             safety_stop: str | None) -> None:
-        """Queue a save of this snapshot (``blobs`` is copied; the plan is frozen)."""
+             safety_stop: str | None, tide: Mapping[str, Any] | None = None) -> None:
+        """Queue a save of this snapshot (``blobs`` is copied; the plan is frozen; ``tide`` is the caller's own)."""
         self._pending.append(self._pool.submit(durable.save, self.state_dir, plan, dict(blobs), log_path=log_path,
-                                               mission_path=mission_path, safety_stop=safety_stop))
+                                               mission_path=mission_path, safety_stop=safety_stop, tide=tide))
 
     def poll(self) -> list[Event]:
         """Errors of the saves that have finished since the last call, as events for the log."""

@@ -15,13 +15,17 @@ plan is looked up at UTC itself.
 
 Pure: ``commanded`` and ``measured`` take and return frozen values; the loop (``executive.loop``)
 logs the event ``measured`` returns, and the decision audit (``planner.shore.replay.audit``)
-applies the shift that event names from the same decision on.
+applies the shift that event names from the same decision on. ``saved`` and ``restored`` carry the
+record and the shift across a restart (``executive.durable``): a restart is then a pause in the
+record, not hours of the tide measured again.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from executive.state import Command, DepthTarget, Event, PositionTarget, SetMode, VehicleState, VelocityYaw
 from planner.contract import tide_timing
@@ -123,3 +127,45 @@ def logged_shift(text: str) -> tuple[int, float] | None:
         return int(crc, 16), float(rest.split(" s:", 1)[0])
     except ValueError:
         return None
+
+
+def saved(watch: TideWatch) -> dict[str, Any] | None:
+    """What a restart needs of ``watch`` (JSON): the table its shift is for, the shift and the record's
+    observations; None when there is nothing to keep. The minute being filled and the command are not
+    kept: after a restart the helm commands again and measuring waits for the command to settle."""
+    clock = watch.clock
+    if watch.table_crc32 is None and not clock.record.observations:
+        return None
+    return {"table_crc32": None if watch.table_crc32 is None else f"{watch.table_crc32:08x}",
+            "shift_s": clock.shift_s,
+            "observations": [[o.unix_s, o.layer, o.east_m_s, o.north_m_s] for o in clock.record.observations]}
+
+
+def restored(saved_watch: Mapping[str, Any]) -> TideWatch:
+    """``saved``'s output read back; ``ValueError`` (or ``KeyError``, ``TypeError``) says what is malformed.
+    The shift is refitted at the first measurement, on the kept record and the ones that follow it."""
+    crc = saved_watch["table_crc32"]
+    shift_s = float(saved_watch["shift_s"])
+    if not (math.isfinite(shift_s) and abs(shift_s) <= tide_timing.MAX_SHIFT_S):
+        raise ValueError(f"tide shift_s {shift_s} is outside +-{tide_timing.MAX_SHIFT_S:g} s")
+    observations = []
+    for row in saved_watch["observations"]:
+        if not (isinstance(row, list) and len(row) == 4 and isinstance(row[1], int) and row[1] >= 0
+                and all(isinstance(x, (int, float)) and math.isfinite(x) for x in row)):
+            raise ValueError(f"tide observation {row!r}: expected [unix_s, layer >= 0, east_m_s, north_m_s]")
+        observations.append(tide_timing.Observation(float(row[0]), row[1], float(row[2]), float(row[3])))
+    observations.sort(key=lambda o: o.unix_s)
+    clock = tide_timing.TideClock(record=tide_timing.CurrentRecord(observations=tuple(observations)), shift_s=shift_s)
+    return TideWatch(clock=clock, table_crc32=None if crc is None else int(str(crc), 16))
+
+
+def kept_text(watch: TideWatch, table: PolicyTable | None) -> Event | None:
+    """The event that says what a restart kept: the shift (for the audit, as ``measured``'s events) when there
+    is one for ``table``, else only the record; None when nothing was kept."""
+    minutes = len(watch.clock.record.observations)
+    if watch.table_crc32 is None and not minutes:
+        return None
+    kept = f"kept from before the restart ({minutes} minutes of the current met)"
+    if table is not None and watch.shift_for(table) != 0.0:
+        return Event("info", f"{SHIFT_PREFIX}{table.crc32:08x} looked up at UTC {watch.shift_for(table):+.0f} s: {kept}")
+    return Event("info", f"tide timing: none in use; {kept}")

@@ -34,11 +34,17 @@ def summary_lines(result: PlanResult, *, out: Path, size: int) -> list[str]:
     if covered < 1.0:
         lines.append(f"warning    the forecast covers {covered:.1%} of the region's cells; the rest have no current and "
                      "are planned as land: give a region within the forecast (lrauv forecast info)")
-    if result.model.settings.model == "physical" and reachable < 0.5 * water_states:
-        error = result.model.settings.physical.current_error_m_s
-        lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g} m/s"
-                     " per component: where the current changes within hours, plan with time in the state"
-                     " (planning.time_varying) rather than a larger error")
+    s = result.model.settings
+    if s.model == "physical" and reachable < 0.5 * water_states:
+        error = s.physical.current_error_m_s
+        if result.horizon is not None:  # time is in the state already: what limits it is the horizon's end
+            lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g}"
+                         f" m/s per component within the {s.horizon_h:g} h horizon, or by its last slice's stationary plan"
+                         " beyond it: a longer horizon (--horizon-h; a tide's whole cycle at least) may reach more")
+        else:
+            lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g}"
+                         " m/s per component: where the current changes within hours, plan with time in the state"
+                         " (planning.time_varying) rather than a larger error")
     return lines
 
 

@@ -69,6 +69,9 @@ def add_parser(sub: Subcommands) -> None:
     plan.add_argument("--horizon-h", type=float, help="time-varying plan: hours of forecast it spans (default 72)")
     plan.add_argument("--slice-h", type=float, help="time-varying plan: hours between slices, a multiple of the "
                                                      "forecast's step (default: every step)")
+    plan.add_argument("--timing-correction", action=argparse.BooleanOptionalAction, default=None,
+                      help="time-varying plan: carry each slice's mean current, so the vehicle fits the tide's timing "
+                           "to the current it meets (default: the mission's planning.timing_correction)")
     plan.add_argument("--current-error", metavar="M_S|measured",
                       help="physical model: forecast error per current component, m/s, or 'measured' from the data")
     plan.add_argument("--previous-forecast", metavar="FILE|URL",
@@ -237,6 +240,9 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
             raise LrauvError(f"{flag}: expected a number of hours > 0; got {value:g}")
     measured = base.error_measured
     physical = base.physical
+    if args.timing_correction and not (args.time_varying or base.time_varying):
+        raise LrauvError("--timing-correction: a stationary plan has no slices to look up earlier or later; give "
+                         "--time-varying (or planning.time_varying: true in the mission)")
     if args.current_error is not None and model != "physical":
         raise LrauvError(f"--current-error: the {model} model has no forecast error to set (its uncertainty is "
                          "--uncertainty); give --model physical")
@@ -260,6 +266,7 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
         costs=cost,
         calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
         time_varying=bool(args.time_varying) or base.time_varying,
+        timing_correction=base.timing_correction if args.timing_correction is None else args.timing_correction,
         horizon_h=base.horizon_h if args.horizon_h is None else args.horizon_h,
         slice_h=base.slice_h if args.slice_h is None else args.slice_h,
     )

@@ -54,6 +54,9 @@ def test_the_active_goal_index_is_kept(plan, demo_plan, tmp_path):
     (lambda d: _edit(d, goal_index=1), "the active goal 1 has no table"),
     (lambda d: next((d / "tables").iterdir()).unlink(), "cannot be read"),
     (lambda d: _flip(next((d / "tables").iterdir())), "CRC"),
+    (lambda d: _edit(d, tide={"table_crc32": None, "shift_s": 0.0, "observations": [[1.0, 0, 0.1]]}),
+     "not a saved executive state .*tide observation"),
+    (lambda d: _edit(d, tide={"table_crc32": "zz", "shift_s": 0.0, "observations": []}), "not a saved executive state"),
 ])
 def test_a_damaged_state_is_refused_naming_the_file(plan, tmp_path, damage, words):
     durable.save(tmp_path, plan, {}, log_path=tmp_path / "run.mcap", mission_path=None)

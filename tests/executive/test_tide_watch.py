@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,7 +17,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from executive import tide_watch  # noqa: E402
+from executive import durable, tide_watch  # noqa: E402
 from executive.recorder import Topic  # noqa: E402
 from executive.state import DepthTarget, PositionTarget, SetMode, VehicleState, VelocityYaw  # noqa: E402
 from planner.contract import tide_timing  # noqa: E402
@@ -77,40 +78,47 @@ def test_the_logged_shift_reads_back() -> None:
     assert tide_watch.logged_shift("plan swapped") is None
 
 
+class LateTide(Vehicle):
+    """A vehicle that flies the executive's commands in the truth's current, an hour behind the forecast's:
+    its ground velocity is the current met plus the velocity last commanded (none in a depth hold)."""
+
+    def __init__(self, table: PolicyTable, log: Path, **kwargs) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(table, log, **kwargs)
+        self.water = [0.0, 0.0]  # north, east through the water
+        send = self.executive._send_command
+
+        def sent(now_s: float, cmd) -> None:  # type: ignore[no-untyped-def]
+            if isinstance(cmd, VelocityYaw):
+                self.water = [cmd.north_m_s, cmd.east_m_s]
+            elif isinstance(cmd, DepthTarget) or (isinstance(cmd, SetMode) and cmd.mode is SubMode.ALT_HOLD):
+                self.water = [0.0, 0.0]
+            send(now_s, cmd)
+
+        self.executive._send_command = sent  # type: ignore[method-assign]
+
+    def fly(self, hours: float, start_ms: int = 0) -> None:
+        """Set up (UTC at boot: the first slice's time), then a position every 15 s for ``hours``."""
+        self.time_ms = start_ms
+        self.heartbeat()
+        self.system_time(T0 + start_ms / 1000.0)
+        water = np.argwhere(self.table.water[0])
+        j, i = (int(x) for x in water[len(water) // 2])
+        lat, lon = self.table.cell_centre(j, i)
+        for _ in range(int(hours * 3600 / 15)):
+            self.time_ms += 15_000
+            east = forecast_current(T0 + self.time_ms / 1000.0 - LATE_S) + self.water[1]
+            self._feed(self.mav.global_position_int_encode(self.time_ms, round(lat * 1e7), round(lon * 1e7), 0, 0,
+                                                           round(self.water[0] * 100), round(east * 100), 0,
+                                                           round(self.table.bearing_deg(j, 0) * 100) % 36000))
+
+
 def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal, tmp_path) -> None:
     """The vehicle drifts (DRIFT) and moves (FORWARD, a velocity east) with the truth's current, an hour
     behind the forecast's; once the record spans enough of the tide, the slices are looked up an hour
     earlier, the log says so, and the audit finds every decision where the loop made it."""
-    v = Vehicle(tidal, tmp_path / "exec.mcap")
-    feed = v._feed
-    water = [0.0, 0.0]  # what the vehicle flies through the water: the last velocity sent, none in a depth hold
-    send = v.executive._send_command
-
-    def sent(now_s: float, cmd) -> None:  # type: ignore[no-untyped-def]
-        if isinstance(cmd, VelocityYaw):
-            water[:] = [cmd.north_m_s, cmd.east_m_s]
-        elif isinstance(cmd, DepthTarget) or (isinstance(cmd, SetMode) and cmd.mode is SubMode.ALT_HOLD):
-            water[:] = [0.0, 0.0]
-        send(now_s, cmd)
-
-    v.executive._send_command = sent  # type: ignore[method-assign]
-
-    def position(dt_s: float) -> None:
-        v.time_ms += round(dt_s * 1000)
-        now = T0 + v.time_ms / 1000.0
-        j, i = (int(x) for x in np.argwhere(tidal.water[0])[len(np.argwhere(tidal.water[0])) // 2])
-        lat, lon = tidal.cell_centre(j, i)
-        east = forecast_current(now - LATE_S) + water[1]  # ground = the current met + through the water
-        feed(v.mav.global_position_int_encode(v.time_ms, round(lat * 1e7), round(lon * 1e7), 0, 0,
-                                              round(water[0] * 100), round(east * 100), 0,
-                                              round(tidal.bearing_deg(j, 0) * 100) % 36000))
-
+    v = LateTide(tidal, tmp_path / "exec.mcap")
     try:
-        v.time_ms = 0
-        v.heartbeat()
-        v.system_time(T0)  # UTC at boot: the first slice's time
-        for _ in range(int(5 * 3600 / 15)):  # five hours, a position every 15 s
-            position(15.0)
+        v.fly(5.0)
     finally:
         v.close()
     decisions, _, events = _log(tmp_path / "exec.mcap")
@@ -130,6 +138,50 @@ def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal
     policy = [m.payload for m in open_dive(tmp_path / "exec.mcap").messages([Topic.POLICY])]
     assert policy[0]["slices"]["timing_correction"] is True
 
+
+def test_a_restart_keeps_the_record_and_the_shift(tidal, tmp_path) -> None:
+    """Killed after four hours (the executive saves its state at every fit), resumed from the state
+    directory: the first decisions already look the slices up an hour early, the log says the shift was
+    kept, the audit of the new log agrees, and the kept record goes on being fitted."""
+    state = tmp_path / "state"
+    first = LateTide(tidal, tmp_path / "exec.mcap", state_dir=state)
+    try:
+        first.fly(4.0)
+        shift = first.executive.tide.shift_for(tidal)
+    finally:
+        first.close()
+    assert shift == pytest.approx(-LATE_S, abs=900)
+    resumed = durable.load(state)
+    assert resumed.tide is not None and resumed.tide.shift_for(tidal) == shift
+    assert len(resumed.tide.clock.record.observations) >= 200  # minutes of the four hours' record
+    second = LateTide(tidal, tmp_path / "resumed.mcap", tide=resumed.tide)
+    try:
+        second.fly(1.0, start_ms=first.time_ms + 600_000)  # back ten minutes later
+    finally:
+        second.close()
+    decisions, _, events = _log(tmp_path / "resumed.mcap")
+    kept = [text for _, text in events if text.startswith(tide_watch.SHIFT_PREFIX)]
+    assert kept[0].endswith("minutes of the current met)") and tide_watch.logged_shift(kept[0]) == (tidal.crc32, shift)
+    assert decisions and all(d["slice"] == math.ceil((d["time_s"] + shift) / 3600.0 - 0.5) for d in decisions)  # ties: the earlier
+    assert second.executive.tide.clock.last_fit is not None and second.executive.tide.clock.last_fit.accepted
+    result = audit(open_dive(tmp_path / "resumed.mcap"))
+    assert result.clean and result.timed == len(decisions)
+
+
+def test_a_saved_record_reads_back_or_is_refused_by_name() -> None:
+    clock = tide_timing.TideClock(record=tide_timing.CurrentRecord(observations=(
+        tide_timing.Observation(T0, 0, 0.25, -0.5), tide_timing.Observation(T0 + 60.0, 1, 0.3, 0.0))), shift_s=-1200.0)
+    watch = tide_watch.TideWatch(clock=clock, water_ne_m_s=(0.1, 0.2), since_s=3.0, table_crc32=0xABCD)
+    saved = tide_watch.saved(watch)
+    back = tide_watch.restored(saved)
+    assert back.clock.record.observations == clock.record.observations and back.clock.shift_s == -1200.0
+    assert back.table_crc32 == 0xABCD and back.water_ne_m_s is None  # the command is not kept: the helm sends again
+    assert tide_watch.saved(tide_watch.TideWatch()) is None
+    for bad, words in (({**saved, "shift_s": 1e6}, "shift_s"), ({**saved, "observations": [[T0, -1, 0.0, 0.0]]}, "observation"),
+                       ({**saved, "observations": [[T0, 0, "x", 0.0]]}, "observation"),
+                       ({**saved, "observations": [[T0, 0, 0.0]]}, "observation")):
+        with pytest.raises(ValueError, match=words):
+            tide_watch.restored(bad)
 
 
 def test_a_shift_the_current_no_longer_supports_is_withdrawn_and_logged(tidal) -> None:

@@ -93,13 +93,13 @@ def test_another_table_is_announced_afresh(timed, demo_plan):
 class Vehicle:
     """Parsed MAVLink messages from the autopilot (system 1, component 1), fed to an ``Executive`` here."""
 
-    def __init__(self, table: PolicyTable, log: Path) -> None:
+    def __init__(self, table: PolicyTable, log: Path, *, state_dir: Path | None = None, tide=None) -> None:  # type: ignore[no-untyped-def]
         self.sink = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)  # where the executive's output goes
         self.sink.bind(("127.0.0.1", 0))
-        config = ExecConfig(link=f"udpout:127.0.0.1:{self.sink.getsockname()[1]}", log_path=log,
+        config = ExecConfig(link=f"udpout:127.0.0.1:{self.sink.getsockname()[1]}", log_path=log, state_dir=state_dir,
                             # The script moves the vehicle's clock on by minutes at once: no jump is doubted here.
                             helm=HelmConfig(limits=Limits(max_clock_jump_s=1e9)))
-        self.executive = Executive(config, table)
+        self.executive = Executive(config, table, tide=tide)
         self.table = table
         self.mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
         self.parser = mavlink.MAVLink(None)

@@ -85,7 +85,12 @@ def test_plan_says_what_it_chose_and_warns_when_most_states_are_unreachable(file
     lines = summary_lines(result, out=tmp_path / "t.lrpt", size=0)
     assert any(line.startswith("error      ") and "forecast change" in line for line in lines)
     assert result.model.settings.physical.current_error_m_s == round(result.error.current_error_m_s, 4)
-    assert any(line.startswith("warning    fewer than half the water states") for line in lines), lines
+    assert any(line.startswith("warning    fewer than half the water states") and "time in the state" in line
+               for line in lines), lines
+    # Planned with time in the state over the same 6 hours, the advice is the horizon, not time in the state.
+    varying = make_plan(replace(request, settings=replace(settings, time_varying=True)))
+    warned = [line for line in summary_lines(varying, out=tmp_path / "t.lrpt", size=0) if "fewer than half" in line]
+    assert len(warned) == 1 and "within the 6 h horizon" in warned[0] and "time in the state" not in warned[0]
 
 
 @pytest.fixture(scope="module")

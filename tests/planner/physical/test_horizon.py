@@ -259,3 +259,10 @@ def test_lrauv_plan_of_the_tidal_mission_carries_the_slices_currents_and_says_so
     assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (4, 1, 2)
     # The channel's flood runs east along it: the mean current of the first slice is eastward and strong.
     assert table.slice_current_m_s[0, 0, 0] > 0.2
+    # The flag overrides the mission's key, either way; on a stationary plan it is refused, not ignored.
+    assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
+                 "--horizon-h", "3", "--no-timing-correction", "--out", str(out), "--quiet"]) == 0
+    assert PolicyTable.load(out).slice_current_m_s is None and "timing " not in capsys.readouterr().out
+    assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast),
+                 "--timing-correction", "--out", str(tmp_path / "stationary.lrpt"), "--quiet"]) == 2
+    assert "--timing-correction: a stationary plan has no slices" in capsys.readouterr().err
