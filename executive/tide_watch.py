@@ -96,7 +96,7 @@ def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState,
     if watch.table_crc32 != table.crc32:  # another plan: its own reference, fitted afresh on the record so far
         clock = tide_timing.TideClock(record=clock.record)
     north, east = watch.water_ne_m_s
-    after = tide_timing.advance(clock, utc_s, cell[0], ground_east_m_s - east, ground_north_m_s - north,
+    after = tide_timing.advance(clock, utc_s, table.current_region(cell), ground_east_m_s - east, ground_north_m_s - north,
                                 table.slice_unix_s, table.slice_current_m_s)
     new = TideWatch(after, watch.water_ne_m_s, watch.since_s, table.crc32)
     # Logged whenever what the log last said no longer holds: a new shift for this table, or another
@@ -138,7 +138,7 @@ def saved(watch: TideWatch) -> dict[str, Any] | None:
         return None
     return {"table_crc32": None if watch.table_crc32 is None else f"{watch.table_crc32:08x}",
             "shift_s": clock.shift_s,
-            "observations": [[o.unix_s, o.layer, o.east_m_s, o.north_m_s] for o in clock.record.observations]}
+            "observations": [[o.unix_s, o.region, o.east_m_s, o.north_m_s] for o in clock.record.observations]}
 
 
 def restored(saved_watch: Mapping[str, Any]) -> TideWatch:
@@ -152,7 +152,7 @@ def restored(saved_watch: Mapping[str, Any]) -> TideWatch:
     for row in saved_watch["observations"]:
         if not (isinstance(row, list) and len(row) == 4 and isinstance(row[1], int) and row[1] >= 0
                 and all(isinstance(x, (int, float)) and math.isfinite(x) for x in row)):
-            raise ValueError(f"tide observation {row!r}: expected [unix_s, layer >= 0, east_m_s, north_m_s]")
+            raise ValueError(f"tide observation {row!r}: expected [unix_s, region >= 0, east_m_s, north_m_s]")
         observations.append(tide_timing.Observation(float(row[0]), row[1], float(row[2]), float(row[3])))
     observations.sort(key=lambda o: o.unix_s)
     clock = tide_timing.TideClock(record=tide_timing.CurrentRecord(observations=tuple(observations)), shift_s=shift_s)

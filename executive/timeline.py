@@ -106,4 +106,6 @@ def slices_record(table: PolicyTable) -> dict[str, Any]:
                               "last_utc": table.slice_times[-1]}
     if table.slice_current_m_s is not None:  # the tide's timing is fitted onboard (executive.tide_watch)
         record["timing_correction"] = True
+        if table.current_block_cells is not None:  # its reference current per block of cells, not per layer
+            record["timing_block_cells"] = table.current_block_cells
     return record

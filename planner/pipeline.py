@@ -481,11 +481,13 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
                     f"{len(steps)} time slices over {(forecast.time_s[steps[-1]] - forecast.time_s[steps[0]]) / 3600:g} h")
 
     sampled = [0]  # slices sampled so far, whatever order the solver asks for them in
-    current = np.zeros((len(steps), grid.n_layers, 2))  # each slice's mean current per layer, for the tide's timing
+    block = settings.timing_block_cells
+    rows, cols = (1, 1) if block is None else (-(-grid.ny // block), -(-grid.nx // block))
+    current = np.zeros((len(steps), grid.n_layers * rows * cols, 2))  # each slice's mean current per region, for the tide's timing
 
     def model_at(n: int) -> PhysicalModel:
         uf, vf = (uf0, vf0) if n == 0 else resample(forecast, fine, time_index=forecast.step_index(steps[n]))
-        current[n] = layer_mean_current(uf[:, ::refine, ::refine], vf[:, ::refine, ::refine])
+        current[n] = region_mean_current(uf[:, ::refine, ::refine], vf[:, ::refine, ::refine], block)
         stats = sample_transitions(uf, vf, grid, settings, refine=refine)
         stats = enter_goal(stats, uf, vf, grid, settings, refine=refine, goal_mask=goal_mask)
         sampled[0] = min(sampled[0] + 1, len(steps))
@@ -507,19 +509,27 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     table = PolicyTable.from_solution(
         solution, forecast_source=forecast.source, forecast_identity=forecast.identity,
         forecast_time=slice_times[0],
-    ).with_slices(slice_times, horizon.action, current if settings.timing_correction else None)
+    ).with_slices(slice_times, horizon.action, current if settings.timing_correction else None,
+                  block_cells=block)
     return PlanResult(forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=solution.model,
                       solution=solution, table=table, timings_s=timings, horizon=horizon, error=error)
 
 
-def layer_mean_current(u_m_s: NDArray[np.float64], v_m_s: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(L, 2): the mean east and north current over each layer's water (finite) nodes; 0 for a layer of land."""
-    out = np.zeros((u_m_s.shape[0], 2))
-    for l in range(u_m_s.shape[0]):
-        wet = np.isfinite(u_m_s[l]) & np.isfinite(v_m_s[l])
-        if np.any(wet):
-            out[l] = float(np.mean(u_m_s[l][wet])), float(np.mean(v_m_s[l][wet]))
-    return out
+def region_mean_current(u_m_s: NDArray[np.float64], v_m_s: NDArray[np.float64],
+                        block_cells: int | None = None) -> NDArray[np.float64]:
+    """(R, 2): the mean east and north current over each region's water (finite) nodes, 0 for a region of land.
+    A region is a layer, or with ``block_cells`` a block of that many cells a side, in the order of
+    ``PolicyTable.current_region``: layer, then block row, then block column."""
+    L, ny, nx = u_m_s.shape
+    k = max(ny, nx) if block_cells is None else block_cells
+    out = []
+    for l in range(L):
+        for j0 in range(0, ny, k):
+            for i0 in range(0, nx, k):
+                u, v = u_m_s[l, j0:j0 + k, i0:i0 + k], v_m_s[l, j0:j0 + k, i0:i0 + k]
+                wet = np.isfinite(u) & np.isfinite(v)
+                out.append((float(np.mean(u[wet])), float(np.mean(v[wet]))) if np.any(wet) else (0.0, 0.0))
+    return np.array(out).reshape(-1, 2)
 
 
 def plan_with_scheduler(request: PlanRequest, *, scheduler: str | None = None, workers: int | None = None,

@@ -78,7 +78,9 @@ def model_lines(result: PlanResult) -> list[str]:
         lines.append(f"slices     {h.n_slices} slices, {times[0]} to {times[-1]} ({spacing}); past the"
                      f" last, its stationary plan; {sum(h.sweeps):,} Gauss-Seidel sweeps over the earlier slices")
         if result.table.slice_current_m_s is not None:
-            lines.append("timing     each slice's mean current per layer carried: the vehicle fits the tide's timing to the"
+            k = result.table.current_block_cells
+            per = "per layer" if k is None else f"per block of {k} x {k} cells ({result.table.n_current_regions} blocks)"
+            lines.append(f"timing     each slice's mean current {per} carried: the vehicle fits the tide's timing to the"
                          " current it meets and looks its slices up that much earlier or later (docs/time-varying.md)")
     elif s.criterion == "expected":
         lines.append(f"solve      value iteration: {sol.sweeps} sweeps, then policy iteration: {sol.iterations} "

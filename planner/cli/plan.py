@@ -72,6 +72,9 @@ def add_parser(sub: Subcommands) -> None:
     plan.add_argument("--timing-correction", action=argparse.BooleanOptionalAction, default=None,
                       help="time-varying plan: carry each slice's mean current, so the vehicle fits the tide's timing "
                            "to the current it meets (default: the mission's planning.timing_correction)")
+    plan.add_argument("--timing-block-cells", type=int, metavar="N",
+                      help="with --timing-correction: a reference current per block of N x N cells in each layer, not"
+                           " one mean per layer (default: the mission's planning.timing_block_cells)")
     plan.add_argument("--current-error", metavar="M_S|measured",
                       help="physical model: forecast error per current component, m/s, or 'measured' from the data")
     plan.add_argument("--previous-forecast", metavar="FILE|URL",
@@ -243,6 +246,8 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
     if args.timing_correction and not (args.time_varying or base.time_varying):
         raise LrauvError("--timing-correction: a stationary plan has no slices to look up earlier or later; give "
                          "--time-varying (or planning.time_varying: true in the mission)")
+    if args.timing_block_cells is not None and args.timing_block_cells < 1:
+        raise LrauvError(f"--timing-block-cells: expected a whole number of cells >= 1; got {args.timing_block_cells}")
     if args.current_error is not None and model != "physical":
         raise LrauvError(f"--current-error: the {model} model has no forecast error to set (its uncertainty is "
                          "--uncertainty); give --model physical")
@@ -267,6 +272,7 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
         calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
         time_varying=bool(args.time_varying) or base.time_varying,
         timing_correction=base.timing_correction if args.timing_correction is None else args.timing_correction,
+        timing_block_cells=base.timing_block_cells if args.timing_block_cells is None else args.timing_block_cells,
         horizon_h=base.horizon_h if args.horizon_h is None else args.horizon_h,
         slice_h=base.slice_h if args.slice_h is None else args.slice_h,
     )

@@ -411,7 +411,8 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     )
 
     pl = top.section("planning", {"model", "criterion", "uncertainty", "costs", "calm_speed_m_s", "physical",
-                                  "time_varying", "horizon_h", "slice_h", "timing_correction"})
+                                  "time_varying", "horizon_h", "slice_h", "timing_correction",
+                                  "timing_block_cells"})
     model = pl.choice("model", MODEL_OPTIONS, "paper")
     criterion_text = pl.text("criterion", "robust")
     if criterion_text not in CRITERIA[model]:
@@ -431,6 +432,10 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
     if time_varying and model != "physical":
         raise doc.error("planning.time_varying", f"needs planning.model physical (its transitions carry durations); got {model!r}")
     timing_correction = pl.boolean("timing_correction", False)
+    timing_block = pl.integer("timing_block_cells", minimum=1) if pl.has("timing_block_cells") else None
+    if timing_block is not None and not timing_correction:
+        raise doc.error("planning.timing_block_cells", "a reference current per block is for the tide's timing: it needs"
+                                                       " planning.timing_correction: true")
     settings = PlanSettings(
         model=model,
         criterion=criterion,
@@ -443,6 +448,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         horizon_h=pl.number("horizon_h", 72.0, minimum=1, unit="h"),
         slice_h=pl.number("slice_h", minimum=0.01, unit="h") if pl.has("slice_h") else None,
         timing_correction=timing_correction,
+        timing_block_cells=timing_block,
         error_measured=_measured(pl),
     )
 

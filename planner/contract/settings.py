@@ -164,6 +164,9 @@ class PlanSettings:
     # (planner.contract.tide_timing); False: slices at the vehicle's own UTC time. A stationary plan has no
     # slices to shift: there it changes nothing.
     timing_correction: bool = False
+    # The reference current of that fit per block of this many cells a side in each layer, not one
+    # mean per layer: where the tide's phase varies across the region (docs/time-varying.md). None: per layer.
+    timing_block_cells: int | None = None
     # ``physical.current_error_m_s`` measured from the data (planner.forecast.error) rather than given.
     error_measured: bool = False
 
@@ -172,6 +175,10 @@ class PlanSettings:
             raise ContractError(f"time_varying: expected true or false; got {self.time_varying!r}")
         if not isinstance(self.timing_correction, bool):
             raise ContractError(f"timing_correction: expected true or false; got {self.timing_correction!r}")
+        if self.timing_block_cells is not None and (isinstance(self.timing_block_cells, bool)
+                                                    or not isinstance(self.timing_block_cells, int)
+                                                    or self.timing_block_cells < 1):
+            raise ContractError(f"timing_block_cells: expected a whole number of cells >= 1; got {self.timing_block_cells!r}")
         if self.time_varying and self.model != "physical":
             raise ContractError(f"time_varying: needs the physical model (its transitions carry durations); got model {self.model!r}")
         if isinstance(self.horizon_h, bool) or not (isinstance(self.horizon_h, int | float) and math.isfinite(self.horizon_h)

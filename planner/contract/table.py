@@ -8,7 +8,6 @@ grid) and never imports the solver either.
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import lzma
 import math
@@ -29,11 +28,11 @@ from planner.contract.actions import FORWARD_ACTIONS, Action
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import TableError
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
+from planner.contract.table_header import MAX_STATES, header_fields, slice_unix_s
 
 MAGIC = b"LRAUVPT\x00"
 FORMAT_VERSION = 1  # a stationary plan; its files are what they always were
 TIMED_VERSION = 2  # a time-varying plan: one slice of actions per forecast time (docs/policy-table.md)
-MAX_SLICES = 10_000
 FLAG_ZLIB = 0x0001
 # Version 2 only: the payload is an xz (LZMA2) stream, 28 % smaller than zlib's on the demo's 73
 # hourly slices; xz is in Python's standard library, so the vehicle side needs nothing more.
@@ -41,7 +40,6 @@ FLAG_XZ = 0x0002
 _PREAMBLE = struct.Struct("<8sHHI")  # magic, version, flags, header length
 _PAYLOAD = struct.Struct("<II")  # stored payload length, raw payload length
 _CRC = struct.Struct("<I")
-MAX_STATES = 1 << 31
 # A cell is left only once the vehicle is this fraction of a spacing beyond its edge
 # (docs/executive.md): the executive's default, and the evaluation's (docs/evaluation.md).
 CELL_MARGIN = 0.1
@@ -108,10 +106,12 @@ class PolicyTable:
     # is the first slice. Empty and None for a stationary plan.
     slice_times: tuple[str, ...] = ()
     slices: NDArray[np.uint8] | None = field(default=None, repr=False)
-    # Optional, time-varying plans: each slice's forecast current, the mean over each layer's water cells
-    # (T, L, 2: east, north, m/s, to the cm/s), from which the executive fits the tide's timing
-    # (``planner.contract.tide_timing``). None: the plan is looked up at the vehicle's own UTC time.
+    # Optional, time-varying plans: each slice's forecast current per region, the mean over the region's
+    # water cells (T, R, 2: east, north, m/s, to the cm/s), from which the executive fits the tide's timing
+    # (``planner.contract.tide_timing``). A region is a layer, or with ``current_block_cells`` a block of
+    # that many cells a side within a layer (``current_region``). None: looked up at the vehicle's own UTC.
     slice_current_m_s: NDArray[np.float64] | None = field(default=None, repr=False)
+    current_block_cells: int | None = None
     # Where the plan expects the vehicle to go from the start it was planned with (``lrauv plan
     # --start``): (lon, lat) vertices, the real start first (spec section 5's nominal outcomes; for
     # a physical plan the most likely ones). Shown on the vehicle's map; empty when not planned.
@@ -135,8 +135,11 @@ class PolicyTable:
             self.slices.setflags(write=False)
         elif self.slice_times:
             raise TableError("table slices: slice times without slices")
+        if self.current_block_cells is not None and (self.slice_current_m_s is None or self.current_block_cells < 1):
+            raise TableError(f"table slice currents: a block of {self.current_block_cells} cells needs slice currents"
+                             " and at least one cell")
         if self.slice_current_m_s is not None:
-            expected = (self.n_slices, len(self.depth_m), 2)
+            expected = (self.n_slices, self.n_current_regions, 2)
             if self.slices is None or self.slice_current_m_s.shape != expected:
                 raise TableError(f"table slice currents: expected {expected} for a time-varying table; got "
                                  f"{self.slice_current_m_s.shape}{'' if self.slices is not None else ' on a stationary one'}")
@@ -201,14 +204,34 @@ class PolicyTable:
 
     # -- time -----------------------------------------------------------------------
     def with_slices(self, times_utc: tuple[str, ...], actions: NDArray[np.uint8],
-                    current_m_s: NDArray[np.float64] | None = None) -> PolicyTable:
+                    current_m_s: NDArray[np.float64] | None = None, *, block_cells: int | None = None) -> PolicyTable:
         """This table made time-varying: slice ``n`` (actions ``(L, ny, nx, 8)``) holds around ``times_utc[n]``;
-        ``current_m_s`` (T, L, 2), each slice's mean current per layer, lets the vehicle fit the tide's timing."""
+        ``current_m_s`` (T, R, 2), each slice's mean current per region (a layer, or a block of ``block_cells``
+        cells a side: ``current_region``), lets the vehicle fit the tide's timing."""
         stack = np.ascontiguousarray(actions, dtype=np.uint8)
-        _slice_unix_s(times_utc, "slice times")  # ISO 8601 UTC, increasing
+        slice_unix_s(times_utc, "slice times")  # ISO 8601 UTC, increasing
         current = None if current_m_s is None else np.round(np.asarray(current_m_s, dtype=np.float64) * 100.0) / 100.0
         return replace(self, actions=np.ascontiguousarray(stack[0]), slices=stack, slice_times=tuple(times_utc),
-                       slice_current_m_s=current)
+                       slice_current_m_s=current, current_block_cells=None if current is None else block_cells)
+
+    def current_blocks(self) -> tuple[int, int]:
+        """(rows, columns) of current regions in a layer: blocks of ``current_block_cells``, or the whole layer."""
+        k = self.current_block_cells
+        return (1, 1) if k is None else (-(-self.ny // k), -(-self.nx // k))
+
+    @property
+    def n_current_regions(self) -> int:
+        rows, cols = self.current_blocks()
+        return len(self.depth_m) * rows * cols
+
+    def current_region(self, cell: tuple[int, int, int]) -> int:
+        """The index into ``slice_current_m_s``'s regions of cell (layer, row, column)."""
+        l, j, i = cell
+        k = self.current_block_cells
+        if k is None:
+            return l
+        rows, cols = self.current_blocks()
+        return (l * rows + j // k) * cols + i // k
 
     @property
     def time_varying(self) -> bool:
@@ -221,7 +244,7 @@ class PolicyTable:
     @cached_property
     def slice_unix_s(self) -> tuple[float, ...]:
         """Each slice's time, Unix seconds (empty for a stationary table)."""
-        return _slice_unix_s(self.slice_times, "slice times") if self.slice_times else ()
+        return slice_unix_s(self.slice_times, "slice times") if self.slice_times else ()
 
     @cached_property
     def _views(self) -> list[PolicyTable | None]:
@@ -233,7 +256,8 @@ class PolicyTable:
             return self
         view = self._views[index]
         if view is None:
-            view = replace(self, actions=self.slices[index], slices=None, slice_times=(), slice_current_m_s=None)
+            view = replace(self, actions=self.slices[index], slices=None, slice_times=(), slice_current_m_s=None,
+                           current_block_cells=None)
             view.__dict__["crc32"] = self.crc32
             self._views[index] = view
         return view
@@ -404,8 +428,10 @@ class PolicyTable:
             time_part: dict[str, Any] = {"slices_utc": list(self.slice_times), "lookup": "nearest"}
             out["time"] = time_part
             if self.slice_current_m_s is not None:  # optional; older readers never saw it
-                time_part["current_cm_s"] = [[[round(float(c) * 100.0) for c in layer] for layer in when]
+                time_part["current_cm_s"] = [[[round(float(c) * 100.0) for c in region] for region in when]
                                                for when in self.slice_current_m_s]
+                if self.current_block_cells is not None:  # optional: without it, a region is a layer
+                    time_part["current_block_cells"] = self.current_block_cells
         if self.nominal_path:  # optional: a table planned without a start keeps the bytes it always had
             out["nominal_path"] = {"lon_lat_deg": [list(point) for point in self.nominal_path]}
         return out
@@ -464,7 +490,7 @@ class PolicyTable:
         except RecursionError:
             raise TableError(f"{name}: header is not valid JSON: nested too deeply") from None
         try:
-            fields = _header_fields(header)
+            fields = header_fields(header)
         except TableError as exc:
             raise TableError(f"{name}: header {exc}") from None
         times = fields.get("slice_times", ())
@@ -600,170 +626,3 @@ def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int], n_slices: int 
     actions[:, 1::2] = packed >> 4
     out = actions[:, : n_cells * N_HEADINGS].reshape((n_slices,) + cell_shape + (N_HEADINGS,))
     return water, (out[0] if n_slices == 1 else out)
-
-
-def _header_fields(header: Any) -> dict[str, Any]:
-    """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value."""
-    top = _section(header, "")
-    g = _section(_key(top, "grid", ""), "grid")
-    nx, ny = _int(_key(g, "nx", "grid"), "grid.nx"), _int(_key(g, "ny", "grid"), "grid.ny")
-    for key, n in (("grid.nx", nx), ("grid.ny", ny)):
-        if n < 2:
-            raise TableError(f"{key}: expected at least 2 cells; got {n}")
-    depth_raw = _key(g, "depth_m", "grid")
-    if not isinstance(depth_raw, list) or not depth_raw:
-        raise TableError(f"grid.depth_m: expected a non-empty list of layer depths in metres; got {depth_raw!r}"[:200])
-    depths = tuple(_float(d, f"grid.depth_m[{n}]") for n, d in enumerate(depth_raw))
-    if depths[0] < 0 or any(b <= a for a, b in zip(depths, depths[1:])):
-        raise TableError(f"grid.depth_m: expected depths >= 0, strictly increasing; got {list(depths)[:12]}")
-    n_states = len(depths) * ny * nx * N_HEADINGS
-    if n_states > MAX_STATES:
-        raise TableError(
-            f"grid: {len(depths)} x {ny} x {nx} x {N_HEADINGS} = {n_states:,} states exceeds the limit of {MAX_STATES:,}"
-        )
-    fields: dict[str, Any] = {"nx": nx, "ny": ny, "depth_m": depths}
-    for key in ("lon0_deg", "lat0_deg", "dlon_deg", "dlat_deg"):
-        fields[key] = _float(_key(g, key, "grid"), f"grid.{key}")
-    for key in ("dlon_deg", "dlat_deg"):
-        if fields[key] <= 0:
-            raise TableError(f"grid.{key}: expected a positive spacing in degrees; got {fields[key]!r}")
-    lat_n = fields["lat0_deg"] + (ny - 1) * fields["dlat_deg"]
-    if fields["lat0_deg"] < -90 or lat_n > 90:
-        raise TableError(f"grid: rows span latitudes {fields['lat0_deg']:g}..{lat_n:g}; expected them within [-90, 90]")
-    headings = _section(_key(top, "headings", ""), "headings")
-    if _key(headings, "count", "headings") != N_HEADINGS:
-        raise TableError(f"headings.count: expected {N_HEADINGS}; got {headings['count']!r}")
-    goal = _section(_key(top, "goal", ""), "goal")
-    fields.update(
-        goal_lon_deg=_float(_key(goal, "lon_deg", "goal"), "goal.lon_deg"),
-        goal_lat_deg=_float(_key(goal, "lat_deg", "goal"), "goal.lat_deg"),
-        goal_depth_m=_float(_key(goal, "depth_m", "goal"), "goal.depth_m"),
-        goal_radius_cells=_int(_key(goal, "radius_cells", "goal"), "goal.radius_cells"),
-    )
-    for key in ("criterion", "uncertainty", "model", "planner_version"):
-        fields[key] = _text(_key(top, key, ""), key)
-    costs = _section(_key(top, "costs", ""), "costs")
-    fields["costs"] = {str(k): _int(v, f"costs.{k}") for k, v in costs.items()}
-    forecast = _section(_key(top, "forecast", ""), "forecast")
-    fields["forecast_source"] = _text(_key(forecast, "source", "forecast"), "forecast.source")
-    fields["forecast_identity"] = _text(_key(forecast, "identity", "forecast"), "forecast.identity")
-    when = _key(forecast, "time", "forecast")
-    fields["forecast_time"] = None if when is None else _text(when, "forecast.time")
-    if "time" in top:  # version 2: a time-varying plan
-        time_part = _section(top["time"], "time")
-        times = _key(time_part, "slices_utc", "time")
-        if not isinstance(times, list):
-            raise TableError(f"time.slices_utc: expected a list of ISO 8601 UTC times; got {times!r}"[:200])
-        _slice_unix_s(times, "time.slices_utc")
-        if _key(time_part, "lookup", "time") != "nearest":
-            raise TableError(f"time.lookup: expected \"nearest\"; got {time_part['lookup']!r}"[:200])
-        fields["slice_times"] = tuple(times)
-        if "current_cm_s" in time_part:  # optional; older readers never saw it
-            fields["slice_current_m_s"] = _slice_current(time_part["current_cm_s"], len(times), len(depths))
-    if "nominal_path" in top:  # optional; older readers never saw it
-        fields["nominal_path"] = _lon_lat_points(_key(_section(top["nominal_path"], "nominal_path"), "lon_lat_deg",
-                                                      "nominal_path"), "nominal_path.lon_lat_deg")
-    if "physical" in top:  # optional (physical plans); older readers never saw it
-        physical = _section(top["physical"], "physical")
-        fields["physical"] = {}
-        for part in ("vehicle", "sampling"):
-            values = _section(_key(physical, part, "physical"), f"physical.{part}")
-            # null: a sampling setting left to the model (max_transition_s); true/false: the switch course_offsets
-            fields["physical"][part] = {str(k): _switch(v, f"physical.{part}.{k}") if (part, k) == ("sampling", "course_offsets")
-                                        else None if v is None and part == "sampling" else
-                                        _number(v, f"physical.{part}.{k}") for k, v in values.items()}
-    return fields
-
-
-MAX_PATH_POINTS = 10_000
-
-
-def _slice_current(value: Any, n_slices: int, n_layers: int) -> NDArray[np.float64]:
-    """``time.current_cm_s``: per slice, per layer, [east, north] as whole cm/s."""
-    key = "time.current_cm_s"
-    if not isinstance(value, list) or len(value) != n_slices:
-        raise TableError(f"{key}: expected one entry per slice ({n_slices}); got {repr(value)[:80]}")
-    out = np.empty((n_slices, n_layers, 2))
-    for n, when in enumerate(value):
-        if not isinstance(when, list) or len(when) != n_layers:
-            raise TableError(f"{key}[{n}]: expected one [east, north] per layer ({n_layers}); got {repr(when)[:80]}")
-        for l, pair in enumerate(when):
-            if not isinstance(pair, list) or len(pair) != 2:
-                raise TableError(f"{key}[{n}][{l}]: expected [east, north] in cm/s; got {repr(pair)[:80]}")
-            out[n, l] = [_int(pair[0], f"{key}[{n}][{l}][0]"), _int(pair[1], f"{key}[{n}][{l}][1]")]
-    return out / 100.0
-
-
-def _lon_lat_points(value: Any, key: str) -> tuple[tuple[float, float], ...]:
-    """A list of [lon, lat] pairs in degrees (at most MAX_PATH_POINTS), each within range."""
-    if not isinstance(value, list) or len(value) > MAX_PATH_POINTS:
-        raise TableError(f"{key}: expected a list of at most {MAX_PATH_POINTS:,} [lon, lat] pairs; got {value!r}"[:200])
-    points = []
-    for n, point in enumerate(value):
-        if not isinstance(point, list) or len(point) != 2:
-            raise TableError(f"{key}[{n}]: expected [lon, lat] in degrees; got {point!r}"[:200])
-        lon, lat = _float(point[0], f"{key}[{n}][0]"), _float(point[1], f"{key}[{n}][1]")
-        if not (-180.0 <= lon <= 180.0 and -90.0 <= lat <= 90.0):
-            raise TableError(f"{key}[{n}]: ({lon:g}, {lat:g}) is not a longitude in [-180, 180] and a latitude in [-90, 90]")
-        points.append((lon, lat))
-    return tuple(points)
-
-
-def _section(value: Any, key: str) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        what = f"{key}: expected a JSON object" if key else "is not a JSON object"
-        raise TableError(f"{what}; got {type(value).__name__} {repr(value)[:60]}")
-    return value
-
-
-def _key(section: dict[str, Any], key: str, parent: str) -> Any:
-    if key not in section:
-        raise TableError(f"lacks the key {f'{parent}.{key}' if parent else key!r}")
-    return section[key]
-
-
-def _text(value: Any, key: str) -> str:
-    if not isinstance(value, str):
-        raise TableError(f"{key}: expected text; got {repr(value)[:60]}")
-    return value
-
-
-def _float(value: Any, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise TableError(f"{key}: expected a finite number; got {value!r}")
-    return float(value)
-
-
-def _number(value: Any, key: str) -> float | int:
-    """A finite number, kept an int when it is one (whole-number settings stay whole)."""
-    return value if isinstance(value, int) and not isinstance(value, bool) else _float(value, key)
-
-
-def _switch(value: Any, key: str) -> bool:
-    if not isinstance(value, bool):
-        raise TableError(f"{key}: expected true or false; got {value!r}")
-    return value
-
-
-def _int(value: Any, key: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TableError(f"{key}: expected an integer; got {value!r}")
-    return value
-
-
-def _slice_unix_s(times_utc: tuple[str, ...] | list[Any], key: str) -> tuple[float, ...]:
-    """Unix seconds of ISO 8601 UTC times (``2026-01-15T03:00:00Z``), strictly increasing; TableError naming ``key``."""
-    if not 2 <= len(times_utc) <= MAX_SLICES:
-        raise TableError(f"{key}: expected 2 to {MAX_SLICES:,} slice times; got {len(times_utc)}")
-    out: list[float] = []
-    for n, text in enumerate(times_utc):
-        if not isinstance(text, str) or not text.endswith("Z"):
-            raise TableError(f"{key}[{n}]: expected an ISO 8601 UTC time like 2026-01-15T03:00:00Z; got {text!r}"[:200])
-        try:
-            when = dt.datetime.fromisoformat(text[:-1]).replace(tzinfo=dt.UTC)
-        except ValueError:
-            raise TableError(f"{key}[{n}]: expected an ISO 8601 UTC time like 2026-01-15T03:00:00Z; got {text!r}"[:200]) from None
-        out.append(when.timestamp())
-        if n and out[-1] <= out[-2]:
-            raise TableError(f"{key}[{n}]: {text} is not after the slice before it ({times_utc[n - 1]})")
-    return tuple(out)

@@ -8,10 +8,11 @@ Fitting that record to the forecast's own current, shifted in time, says how far
 UTC time at which the plan's slices are looked up.
 
 The reference is a time-varying table's per-slice current (``PolicyTable.slice_current_m_s``: the
-mean over each layer's water cells). Observations are at most one a minute, each the median of
+mean over each region's water cells, a region being a layer or a block of one; each observation is
+compared with its own region's). Observations are at most one a minute, each the median of
 that minute's measurements (at least ``MIN_BIN_SAMPLES``), so one bad measurement never decides; a
 fit over the last ``WINDOW_S`` chooses the shift ``tau`` (and a scale ``a``, the vehicle's place against the
-layer's mean) minimising ``sum |obs(t) - a ref(t + tau)|^2``. Each shift is judged by the share of
+region's mean) minimising ``sum |obs(t) - a ref(t + tau)|^2``. Each shift is judged by the share of
 the observations' variance it explains (R^2) over the observations whose shifted time lies within
 the slices; the best is accepted when its observations span at least ``MIN_SPAN_S`` and it
 explains ``MIN_R2`` of them, with a scale within ``SCALE_RANGE`` and its shift inside the search
@@ -36,17 +37,18 @@ MIN_SPAN_S = 2.0 * 3600.0  # a sixth of a semi-diurnal tide: its timing shows, w
 MIN_R2 = 0.8
 BIN_S = 60.0
 MIN_BIN_SAMPLES = 3  # a minute of fewer measurements is dropped: its median would be one sample's, or two's mean
-SCALE_RANGE = (0.25, 4.0)  # the current met against the layer's mean: beyond, the fit explains noise, not the tide
+SCALE_RANGE = (0.25, 4.0)  # the current met against the region's mean: beyond, the fit explains noise, not the tide
 MAX_CURRENT_M_S = 5.0  # a measurement above this is not an ocean current (the fastest tidal races are near 5 m/s)
 REFIT_S = 600.0  # the shift is fitted again every 10 minutes of record
 
 
 @dataclass(frozen=True, slots=True)
 class Observation:
-    """The current met over one minute (the median of its measurements), at UTC ``unix_s`` in layer ``layer``."""
+    """The current met over one minute (the median of its measurements), at UTC ``unix_s`` in reference region
+    ``region`` (``PolicyTable.current_region``)."""
 
     unix_s: float
-    layer: int
+    region: int
     east_m_s: float
     north_m_s: float
 
@@ -58,7 +60,7 @@ class CurrentRecord:
     observations: tuple[Observation, ...] = ()
     bin_start_s: float | None = None
     bin_last_s: float | None = None
-    bin_layer: int = -1
+    bin_region: int = -1
     bin_east: tuple[float, ...] = ()
     bin_north: tuple[float, ...] = ()
 
@@ -83,34 +85,34 @@ class TimingFit:
                 f"{self.scale:.2f}, r2 {self.r2:.2f} over {self.span_s / 3600:.1f} h, {self.observations} minutes)")
 
 
-def observe(record: CurrentRecord, unix_s: float, layer: int, east_m_s: float, north_m_s: float) -> CurrentRecord:
+def observe(record: CurrentRecord, unix_s: float, region: int, east_m_s: float, north_m_s: float) -> CurrentRecord:
     """``record`` with one measurement of the current added (a non-finite or impossible one is dropped)."""
     if not (math.isfinite(unix_s) and math.isfinite(east_m_s) and math.isfinite(north_m_s)):
         return record
     if math.hypot(east_m_s, north_m_s) > MAX_CURRENT_M_S:
         return record
-    if record.bin_start_s is not None and layer == record.bin_layer and 0.0 <= unix_s - record.bin_start_s < BIN_S:
-        return CurrentRecord(record.observations, record.bin_start_s, unix_s, layer, record.bin_east + (east_m_s,),
+    if record.bin_start_s is not None and region == record.bin_region and 0.0 <= unix_s - record.bin_start_s < BIN_S:
+        return CurrentRecord(record.observations, record.bin_start_s, unix_s, region, record.bin_east + (east_m_s,),
                              record.bin_north + (north_m_s,))
     observations = record.observations
     if len(record.bin_east) >= MIN_BIN_SAMPLES and record.bin_start_s is not None and record.bin_last_s is not None:
-        # Stamped at the middle of its own measurements: a minute cut short (a change of layer) keeps its time.
-        observations = (*observations, Observation(0.5 * (record.bin_start_s + record.bin_last_s), record.bin_layer,
+        # Stamped at the middle of its own measurements: a minute cut short (a change of region) keeps its time.
+        observations = (*observations, Observation(0.5 * (record.bin_start_s + record.bin_last_s), record.bin_region,
                                                    median(record.bin_east), median(record.bin_north)))
     observations = tuple(o for o in observations if unix_s - WINDOW_S <= o.unix_s <= unix_s)
-    return CurrentRecord(observations, unix_s, unix_s, layer, (east_m_s,), (north_m_s,))
+    return CurrentRecord(observations, unix_s, unix_s, region, (east_m_s,), (north_m_s,))
 
 
 def fit(record: CurrentRecord, slice_unix_s: tuple[float, ...] | NDArray[np.float64],
         current_m_s: NDArray[np.float64]) -> TimingFit | None:
-    """The shift that best maps the record onto the reference ``current_m_s`` (slices, layers, east/north) at
+    """The shift that best maps the record onto the reference ``current_m_s`` (slices, regions, east/north) at
     ``slice_unix_s``; None with fewer than two observations."""
     obs = record.observations
     times = np.asarray(slice_unix_s, dtype=np.float64)
     if len(obs) < 2 or times.size < 2 or not bool(np.all(np.diff(times) > 0)):
         return None
     t = np.array([o.unix_s for o in obs])
-    layer = np.clip(np.array([o.layer for o in obs]), 0, current_m_s.shape[1] - 1)
+    region = np.clip(np.array([o.region for o in obs]), 0, current_m_s.shape[1] - 1)
     o = np.array([[o.east_m_s, o.north_m_s] for o in obs])  # (n, 2)
     shifts = np.arange(-MAX_SHIFT_S, MAX_SHIFT_S + STEP_S / 2.0, STEP_S)
     when = t[None, :] + shifts[:, None]  # (shifts, n)
@@ -118,7 +120,7 @@ def fit(record: CurrentRecord, slice_unix_s: tuple[float, ...] | NDArray[np.floa
     valid = ((when >= times[0]) & (when <= times[-1])).astype(np.float64)
     idx = np.clip(np.searchsorted(times, when, side="right") - 1, 0, times.size - 2)
     w = np.clip((when - times[idx]) / (times[idx + 1] - times[idx]), 0.0, 1.0)[..., None]
-    ref = ((1.0 - w) * current_m_s[idx, layer] + w * current_m_s[idx + 1, layer]) * valid[..., None]  # (shifts, n, 2)
+    ref = ((1.0 - w) * current_m_s[idx, region] + w * current_m_s[idx + 1, region]) * valid[..., None]  # (shifts, n, 2)
     rr = np.einsum("snc,snc->s", ref, ref)
     scale = np.where(rr > 0.0, np.einsum("snc,nc->s", ref, o) / np.where(rr > 0.0, rr, 1.0), 0.0)
     scale = np.maximum(scale, 0.0)  # a current that runs against the forecast is not a late one
@@ -155,14 +157,14 @@ class TideClock:
     next_fit_unix_s: float = -math.inf
 
 
-def advance(clock: TideClock, unix_s: float, layer: int, east_m_s: float, north_m_s: float,
+def advance(clock: TideClock, unix_s: float, region: int, east_m_s: float, north_m_s: float,
             slice_unix_s: tuple[float, ...] | NDArray[np.float64], current_m_s: NDArray[np.float64]) -> TideClock:
     """``clock`` after one measurement of the current; every ``REFIT_S`` the shift is fitted again. An
     accepted fit replaces it. A fit over enough record that is not accepted sets it back to none: the
-    forecast's current, shifted, no longer explains the current met (a vehicle gone where the layer's
+    forecast's current, shifted, no longer explains the current met (a vehicle gone where the region's
     mean says little of its own current). A fit over too little record (measurements paused, the record
     thinned out) leaves the last shift: it says nothing new."""
-    record = observe(clock.record, unix_s, layer, east_m_s, north_m_s)
+    record = observe(clock.record, unix_s, region, east_m_s, north_m_s)
     if unix_s < clock.next_fit_unix_s:
         return TideClock(record, clock.shift_s, clock.last_fit, clock.next_fit_unix_s)
     result = fit(record, slice_unix_s, current_m_s)

@@ -112,16 +112,22 @@ class LateTide(Vehicle):
                                                            round(self.table.bearing_deg(j, 0) * 100) % 36000))
 
 
-def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal, tmp_path) -> None:
-    """The vehicle drifts (DRIFT) and moves (FORWARD, a velocity east) with the truth's current, an hour
-    behind the forecast's; once the record spans enough of the tide, the slices are looked up an hour
-    earlier, the log says so, and the audit finds every decision where the loop made it."""
-    v = LateTide(tidal, tmp_path / "exec.mcap")
+def flown(table: PolicyTable, log: Path) -> tuple[list[dict], list[tuple[str, str]]]:
+    """Five hours of ``LateTide`` under ``table``: the log's decisions and events."""
+    v = LateTide(table, log)
     try:
         v.fly(5.0)
     finally:
         v.close()
-    decisions, _, events = _log(tmp_path / "exec.mcap")
+    decisions, _, events = _log(log)
+    return decisions, events
+
+
+def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal, tmp_path) -> None:
+    """The vehicle drifts (DRIFT) and moves (FORWARD, a velocity east) with the truth's current, an hour
+    behind the forecast's; once the record spans enough of the tide, the slices are looked up an hour
+    earlier, the log says so, and the audit finds every decision where the loop made it."""
+    decisions, events = flown(tidal, tmp_path / "exec.mcap")
     shifts = [text for _, text in events if text.startswith(tide_watch.SHIFT_PREFIX)]
     assert shifts, "the tide's timing was never fitted"
     first = tide_watch.logged_shift(shifts[0])
@@ -137,6 +143,25 @@ def test_the_executive_finds_the_tide_late_and_looks_its_slices_up_earlier(tidal
                                    "2026-01-15T12:00:00Z, the tide's timing fitted onboard",)
     policy = [m.payload for m in open_dive(tmp_path / "exec.mcap").messages([Topic.POLICY])]
     assert policy[0]["slices"]["timing_correction"] is True
+
+
+def test_with_a_reference_per_block_the_vehicle_fits_its_own_blocks_current(tidal, tmp_path) -> None:
+    """Blocks of 4 cells: the vehicle's block carries the M2 current, every other block the opposite one,
+    so the layer's mean would be nearly still; the fit finds the hour against its own block."""
+    water = np.argwhere(tidal.water[0])
+    j, i = (int(x) for x in water[len(water) // 2])  # where LateTide flies
+    rows, cols = -(-tidal.ny // 4), -(-tidal.nx // 4)
+    current = np.zeros((HOURS, tidal.n_layers * rows * cols, 2))
+    current[:, :, 0] = -tidal.slice_current_m_s[:, :1, 0]
+    own = (j // 4) * cols + i // 4  # layer 0's block of cell (j, i)
+    current[:, own, 0] = tidal.slice_current_m_s[:, 0, 0]
+    blocked = PolicyTable.from_bytes(tidal.with_slices(tidal.slice_times, tidal.slices, current, block_cells=4).to_bytes())
+    _, events = flown(blocked, tmp_path / "exec.mcap")
+    shifts = [tide_watch.logged_shift(text) for _, text in events if text.startswith(tide_watch.SHIFT_PREFIX)]
+    assert shifts and shifts[-1] is not None and shifts[-1][1] == pytest.approx(-LATE_S, abs=300)
+    assert audit(open_dive(tmp_path / "exec.mcap")).clean
+    policy = [m.payload for m in open_dive(tmp_path / "exec.mcap").messages([Topic.POLICY])]
+    assert policy[0]["slices"]["timing_block_cells"] == 4
 
 
 def test_a_restart_keeps_the_record_and_the_shift(tidal, tmp_path) -> None:

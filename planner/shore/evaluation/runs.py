@@ -189,7 +189,7 @@ class FeedbackPilot:
             return
         north, east = self._water
         self._clock = tide_timing.advance(
-            self._clock, timing.slice_unix_s[0] + body.time_s, cell[0], body.ground_east_m_s - east,
+            self._clock, timing.slice_unix_s[0] + body.time_s, timing.current_region(cell), body.ground_east_m_s - east,
             body.ground_north_m_s - north, timing.slice_unix_s, timing.slice_current_m_s)
 
 

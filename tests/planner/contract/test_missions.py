@@ -47,6 +47,10 @@ def line_of(path: Path, needle: str) -> int:
         ("bbox: [-118.26, 33.30, -117.70, 33.70]", "bbox: [-117.70, 33.30, -118.26, 33.70]", "region.bbox", "WEST < EAST"),
         ("min_battery_pct: 10", "min_battery_pct: 150", "safety.min_battery_pct", "expected at most 100 %; got 150"),
         ("criterion: robust", "criterion: robust\n  timing_correction: often", "planning.timing_correction", "true or false"),
+        ("criterion: robust", "criterion: robust\n  timing_block_cells: 4", "planning.timing_block_cells",
+         "needs planning.timing_correction: true"),
+        ("criterion: robust", "criterion: robust\n  timing_correction: true\n  timing_block_cells: 0",
+         "planning.timing_block_cells", "expected at least 1; got 0"),
     ],
 )
 def test_errors_name_file_line_and_key(tmp_path, old, new, key, message):

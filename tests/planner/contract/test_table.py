@@ -325,6 +325,29 @@ def test_a_time_varying_table_carries_its_slices_currents_to_the_cm_s(timed):
     assert back.to_bytes() == table.to_bytes()
     assert back.slice_table(1).slice_current_m_s is None  # a slice is a stationary plan
     assert "current_cm_s" not in timed.header()["time"]  # without them, the bytes they always had
+    assert "current_block_cells" not in back.header()["time"] and back.current_region((1, 5, 7)) == 1
+
+
+def test_slice_currents_per_block_of_cells_read_back_and_say_which_block_a_cell_is_in(timed):
+    rows, cols = -(-timed.ny // 4), -(-timed.nx // 4)
+    regions = timed.n_layers * rows * cols
+    current = np.arange(3 * regions * 2, dtype=np.float64).reshape(3, regions, 2) / 100.0
+    back = PolicyTable.from_bytes(timed.with_slices(HOURS, timed.slices, current, block_cells=4).to_bytes())
+    assert back.current_block_cells == 4 and back.current_blocks() == (rows, cols) and back.n_current_regions == regions
+    assert np.allclose(back.slice_current_m_s, current)
+    assert back.current_region((0, 0, 0)) == 0 and back.current_region((0, 3, 4)) == 1
+    assert back.current_region((1, 4, 0)) == rows * cols + cols  # the next layer, the second block row
+    assert back.current_region((timed.n_layers - 1, timed.ny - 1, timed.nx - 1)) == regions - 1
+    assert back.slice_table(0).current_block_cells is None
+    with pytest.raises(TableError, match="slice currents"):  # per layer, where blocks were said
+        timed.with_slices(HOURS, timed.slices, np.zeros((3, timed.n_layers, 2)), block_cells=4)
+
+    def header(h):  # type: ignore[no-untyped-def]
+        h["time"]["current_block_cells"] = 0
+        return h
+
+    with pytest.raises(TableError, match=re.escape("time.current_block_cells: expected 1 to")):
+        PolicyTable.from_bytes(_rewritten(back.to_bytes(), header=header))
 
 
 @pytest.mark.parametrize("bad, key", [

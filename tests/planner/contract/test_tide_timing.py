@@ -143,7 +143,7 @@ def test_a_minute_cut_short_by_a_change_of_layer_keeps_its_own_time() -> None:
     for k in range(4):
         rec = tt.observe(rec, T0 + 10.0 * k, 0, 0.1, 0.0)  # 0 .. 30 s in layer 0
     rec = tt.observe(rec, T0 + 35.0, 1, 0.2, 0.0)  # layer 1 closes the minute early
-    assert [(o.unix_s, o.layer) for o in rec.observations] == [(T0 + 15.0, 0)]
+    assert [(o.unix_s, o.region) for o in rec.observations] == [(T0 + 15.0, 0)]
 
 
 def test_a_fit_that_needs_an_implausible_scale_is_not_accepted() -> None:

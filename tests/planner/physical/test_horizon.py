@@ -224,7 +224,7 @@ def test_replay_plans_a_time_varying_table_again_from_its_header(gyre_file, tmp_
 
 
 def test_with_timing_correction_the_table_carries_each_slices_mean_current(gyre_file):
-    from planner.pipeline import layer_mean_current, make_plan
+    from planner.pipeline import make_plan, region_mean_current
 
     plain = make_plan(gyre_request(gyre_file, horizon_h=2.0)).table
     assert plain.slice_current_m_s is None  # off by default: the bytes a time-varying table always had
@@ -233,15 +233,29 @@ def test_with_timing_correction_the_table_carries_each_slices_mean_current(gyre_
     assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (3, 2, 2)
     assert np.array_equal(table.slices, plain.slices)  # the plan is the same; only the lookup may shift
     # Slice 0's is the mean of the planning grid's water currents, to the cm/s.
-    assert np.allclose(table.slice_current_m_s[0], layer_mean_current(result.u_m_s, result.v_m_s), atol=0.005)
+    assert np.allclose(table.slice_current_m_s[0], region_mean_current(result.u_m_s, result.v_m_s), atol=0.005)
+    # Per block of 3 x 3 cells: each block's own mean, looked up by the cell's block.
+    blocked = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True, timing_block_cells=3))
+    back = PolicyTable.from_bytes(blocked.table.to_bytes())
+    rows, cols = back.current_blocks()
+    assert back.current_block_cells == 3 and (rows, cols) == (-(-back.ny // 3), -(-back.nx // 3))
+    assert back.slice_current_m_s is not None and back.slice_current_m_s.shape == (3, 2 * rows * cols, 2)
+    assert np.array_equal(back.slices, plain.slices)
+    l, j, i = 1, back.ny - 1, 4
+    u, v = blocked.u_m_s[l, j // 3 * 3:j // 3 * 3 + 3, 3:6], blocked.v_m_s[l, j // 3 * 3:j // 3 * 3 + 3, 3:6]
+    wet = np.isfinite(u) & np.isfinite(v)
+    assert np.allclose(back.slice_current_m_s[0, back.current_region((l, j, i))], [u[wet].mean(), v[wet].mean()],
+                       atol=0.005)
 
 
 def test_the_mean_current_of_a_layer_skips_land_and_a_layer_of_land_is_still():
-    from planner.pipeline import layer_mean_current
+    from planner.pipeline import region_mean_current
 
     u = np.array([[[0.2, np.nan], [0.4, 0.6]], [[np.nan, np.nan], [np.nan, np.nan]]])
     v = np.array([[[0.1, 0.3], [np.nan, -0.1]], [[np.nan, np.nan], [np.nan, np.nan]]])
-    assert np.allclose(layer_mean_current(u, v), [[0.4, 0.0], [0.0, 0.0]])  # nodes with both components: (0,0), (1,1)
+    assert np.allclose(region_mean_current(u, v), [[0.4, 0.0], [0.0, 0.0]])  # nodes with both components: (0,0), (1,1)
+    # Blocks of one cell: layer 0's four in row order, (0, 1) and (1, 0) without both components; layer 1 land.
+    assert np.allclose(region_mean_current(u, v, 1), [[0.2, 0.1], [0, 0], [0, 0], [0.6, -0.1]] + [[0, 0]] * 4)
 
 
 def test_lrauv_plan_of_the_tidal_mission_carries_the_slices_currents_and_says_so(tmp_path, capsys):
@@ -263,6 +277,10 @@ def test_lrauv_plan_of_the_tidal_mission_carries_the_slices_currents_and_says_so
     assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
                  "--horizon-h", "3", "--no-timing-correction", "--out", str(out), "--quiet"]) == 0
     assert PolicyTable.load(out).slice_current_m_s is None and "timing " not in capsys.readouterr().out
+    assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
+                 "--horizon-h", "3", "--timing-block-cells", "5", "--out", str(out), "--quiet"]) == 0
+    assert "each slice's mean current per block of 5 x 5 cells (15 blocks) carried" in capsys.readouterr().out
+    assert PolicyTable.load(out).current_block_cells == 5
     assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast),
                  "--timing-correction", "--out", str(tmp_path / "stationary.lrpt"), "--quiet"]) == 2
     assert "--timing-correction: a stationary plan has no slices" in capsys.readouterr().err
