@@ -45,9 +45,9 @@ class Sim:
 
 
 class ExecThread:
-    def __init__(self, table, port: int, log: Path, **helm) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, table, port: int, log: Path, *, max_wall_s: float = 90.0, **helm) -> None:  # type: ignore[no-untyped-def]
         config = ExecConfig(link=f"udpout:127.0.0.1:{port}", log_path=log, exit_on_arrival=True, linger_s=20.0,
-                            max_wall_s=90.0, helm=HelmConfig(**helm))
+                            max_wall_s=max_wall_s, helm=HelmConfig(**helm))
         self.executive = Executive(config, table)
         self.stop_event = threading.Event()
         self.summary = None
