@@ -3,7 +3,8 @@
 A state directory holds ``state.json`` (the goals, which table serves each, the
 active goal, the log being written, the safety stop, and the current met with the tide's timing
 fitted to it: ``executive.tide_watch``) and the tables themselves under
-``tables/policy-CRC.lrpt``. The loop saves it at start and at every plan swap;
+``tables/policy-CRC.lrpt``. The loop saves it at start, at every plan swap, when the safety stop
+fires, when an operator resumes and at every fit of the tide's timing (``executive.state_writer``);
 tables are written before the state that names them, each file atomically
 (``planner.contract.atomic``), so a kill at any moment leaves the previous state or the
 new one, never half of either. ``lrauv exec --resume DIR`` loads it back

@@ -196,7 +196,7 @@ class Executive(PlanChanges, StationLink):
                 if table_n is not None:
                     self._blobs[table_n.crc32] = blobs.get(table_n.crc32) or table_n.to_bytes()
                     self._record_policy(table_n, self._blobs[table_n.crc32], "loaded", goal_index=index)
-            kept = tide_watch.kept_text(self.tide, self.plan.table)  # before any decision: the audit applies its shift
+            kept = tide_watch.kept_text(self.tide)  # before any decision: the audit applies its shift
             if kept is not None:
                 self._event(0.0, kept)
             self._save_state(0.0)
@@ -411,7 +411,7 @@ class Executive(PlanChanges, StationLink):
             self._last_time.clear()
             self._jumped_s = 0.0
             self._unix_offset_s = None  # relative to the old boot: UTC is unknown until the next SYSTEM_TIME
-            self.tide = tide_watch.TideWatch(clock=self.tide.clock, table_crc32=self.tide.table_crc32)  # no command yet
+            self.tide = replace(self.tide, water_ne_m_s=None, since_s=0.0)  # no command yet
         now_s = self.clock.now_s(wall)
         if not mine and not self._admitted(msg, signing.Link.AUTOPILOT, now_s, from_autopilot=False):
             return False

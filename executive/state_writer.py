@@ -1,6 +1,6 @@
 """The durable state written by a thread of its own: a slow or full disk never holds up a decision.
 
-``executive.durable.save`` writes the goals, tables and safety stop (with fsync) at the start,
+``executive.durable.save`` writes the goals, tables, safety stop and the tide's record (with fsync) at the start,
 at every plan swap, when the safety stop fires, when an operator resumes and at every fit of the
 tide's timing (every 10 minutes of its record). Each save is a
 snapshot of frozen values handed to one worker thread, so saves land in order and the newest

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from executive.state import Command, DepthTarget, Event, PositionTarget, SetMode, VehicleState, VelocityYaw
@@ -41,12 +41,14 @@ SHIFT_PREFIX = "tide timing: table "
 @dataclass(frozen=True, slots=True)
 class TideWatch:
     """The tide's clock, the through-water velocity the helm last commanded (None: none, or a position
-    hold) and since when, and the table the clock's shift was fitted for."""
+    hold) and since when, the table the clock's shift was fitted for, and how that table numbers its
+    reference regions (``region_layout``: the record's observations are numbered so)."""
 
     clock: tide_timing.TideClock = tide_timing.TideClock()
     water_ne_m_s: tuple[float, float] | None = None
     since_s: float = 0.0
     table_crc32: int | None = None
+    layout: tuple[str | int | float, ...] = ()
 
     def shift_for(self, table: PolicyTable | None) -> float:
         """The shift (s) at which ``table``'s slices are looked up: the fitted one for that table, else 0."""
@@ -67,7 +69,16 @@ def commanded(watch: TideWatch, cmd: Command, now_s: float) -> TideWatch:
         return watch  # modes, arming and message rates say nothing of the velocity
     if same_velocity(water, watch.water_ne_m_s):
         return watch
-    return TideWatch(watch.clock, water, now_s, watch.table_crc32)
+    return replace(watch, water_ne_m_s=water, since_s=now_s)
+
+
+def region_layout(table: PolicyTable) -> tuple[str | int | float, ...]:
+    """What a region number means in ``table`` (``PolicyTable.current_region``): its layers, and with blocks
+    their size and the grid they cut. Two tables with the same layout number the same places alike."""
+    if table.current_block_cells is None:
+        return ("layers", *table.depth_m)
+    return ("blocks", table.current_block_cells, table.ny, table.nx, table.lon0_deg, table.lat0_deg, table.dlon_deg,
+            table.dlat_deg, *table.depth_m)
 
 
 def same_velocity(a: tuple[float, float] | None, b: tuple[float, float] | None) -> bool:
@@ -84,7 +95,7 @@ def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState,
     if not running:
         if watch.water_ne_m_s is None:
             return watch, None
-        return TideWatch(watch.clock, None, now_s, watch.table_crc32), None
+        return replace(watch, water_ne_m_s=None, since_s=now_s), None
     if (table is None or table.slice_current_m_s is None or utc_s is None or watch.water_ne_m_s is None
             or now_s - watch.since_s < SETTLE_S or not fresh
             or vehicle.lat_deg is None or vehicle.lon_deg is None or vehicle.depth_m is None):
@@ -92,13 +103,14 @@ def measured(watch: TideWatch, table: PolicyTable | None, vehicle: VehicleState,
     cell = table.locate(vehicle.lat_deg, vehicle.lon_deg, vehicle.depth_m)
     if cell is None or not (math.isfinite(ground_north_m_s) and math.isfinite(ground_east_m_s)):
         return watch, None
-    clock = watch.clock
-    if watch.table_crc32 != table.crc32:  # another plan: its own reference, fitted afresh on the record so far
-        clock = tide_timing.TideClock(record=clock.record)
+    clock, layout = watch.clock, watch.layout
+    if watch.table_crc32 != table.crc32:  # another plan: its own reference, fitted afresh on the record so far,
+        layout = region_layout(table)  # unless it numbers its regions otherwise: then on a record of its own
+        clock = tide_timing.TideClock(record=clock.record if layout == watch.layout else tide_timing.CurrentRecord())
     north, east = watch.water_ne_m_s
     after = tide_timing.advance(clock, utc_s, table.current_region(cell), ground_east_m_s - east, ground_north_m_s - north,
                                 table.slice_unix_s, table.slice_current_m_s)
-    new = TideWatch(after, watch.water_ne_m_s, watch.since_s, table.crc32)
+    new = replace(watch, clock=after, table_crc32=table.crc32, layout=layout)
     # Logged whenever what the log last said no longer holds: a new shift for this table, or another
     # table while the last logged shift (of the table before) was not none. The audit keeps one
     # (table, shift) as this does, so it looks up the same slices.
@@ -137,7 +149,7 @@ def saved(watch: TideWatch) -> dict[str, Any] | None:
     if watch.table_crc32 is None and not clock.record.observations:
         return None
     return {"table_crc32": None if watch.table_crc32 is None else f"{watch.table_crc32:08x}",
-            "shift_s": clock.shift_s,
+            "shift_s": clock.shift_s, "layout": list(watch.layout),
             "observations": [[o.unix_s, o.region, o.east_m_s, o.north_m_s] for o in clock.record.observations]}
 
 
@@ -155,17 +167,21 @@ def restored(saved_watch: Mapping[str, Any]) -> TideWatch:
             raise ValueError(f"tide observation {row!r}: expected [unix_s, region >= 0, east_m_s, north_m_s]")
         observations.append(tide_timing.Observation(float(row[0]), row[1], float(row[2]), float(row[3])))
     observations.sort(key=lambda o: o.unix_s)
+    layout = saved_watch["layout"]
+    if not (isinstance(layout, list) and all(isinstance(x, (str, int, float)) for x in layout)):
+        raise ValueError(f"tide layout {layout!r}: expected a list of names and numbers")
     clock = tide_timing.TideClock(record=tide_timing.CurrentRecord(observations=tuple(observations)), shift_s=shift_s)
-    return TideWatch(clock=clock, table_crc32=None if crc is None else int(str(crc), 16))
+    return TideWatch(clock=clock, table_crc32=None if crc is None else int(str(crc), 16), layout=tuple(layout))
 
 
-def kept_text(watch: TideWatch, table: PolicyTable | None) -> Event | None:
-    """The event that says what a restart kept: the shift (for the audit, as ``measured``'s events) when there
-    is one for ``table``, else only the record; None when nothing was kept."""
+def kept_text(watch: TideWatch) -> Event | None:
+    """The event that says what a restart kept: the shift and its table (for the audit, as ``measured``'s
+    events: the loop uses it whenever that table is the active one), else only the record; None when
+    nothing was kept."""
     minutes = len(watch.clock.record.observations)
     if watch.table_crc32 is None and not minutes:
         return None
     kept = f"kept from before the restart ({minutes} minutes of the current met)"
-    if table is not None and watch.shift_for(table) != 0.0:
-        return Event("info", f"{SHIFT_PREFIX}{table.crc32:08x} looked up at UTC {watch.shift_for(table):+.0f} s: {kept}")
+    if watch.table_crc32 is not None and watch.clock.shift_s != 0.0:
+        return Event("info", f"{SHIFT_PREFIX}{watch.table_crc32:08x} looked up at UTC {watch.clock.shift_s:+.0f} s: {kept}")
     return Event("info", f"tide timing: none in use; {kept}")

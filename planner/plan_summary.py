@@ -38,9 +38,15 @@ def summary_lines(result: PlanResult, *, out: Path, size: int) -> list[str]:
     if s.model == "physical" and reachable < 0.5 * water_states:
         error = s.physical.current_error_m_s
         if result.horizon is not None:  # time is in the state already: what limits it is the horizon's end
+            times = result.table.slice_unix_s
+            span_h = (times[-1] - times[0]) / 3600.0
+            longer = ("a longer horizon (--horizon-h; a tide's whole cycle at least) may reach more"
+                      if span_h >= s.horizon_h - 1e-6 else
+                      f"the forecast ends there (planning.horizon_h asks {s.horizon_h:g} h): a forecast that runs longer"
+                      " may reach more")
             lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g}"
-                         f" m/s per component within the {s.horizon_h:g} h horizon, or by its last slice's stationary plan"
-                         " beyond it: a longer horizon (--horizon-h; a tide's whole cycle at least) may reach more")
+                         f" m/s per component within the plan's {span_h:g} h of slices, or by its last slice's"
+                         f" stationary plan beyond them: {longer}")
         else:
             lines.append(f"warning    fewer than half the water states can reach the goal under a forecast error of {error:g}"
                          " m/s per component: where the current changes within hours, plan with time in the state"

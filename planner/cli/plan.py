@@ -248,6 +248,10 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
                          "--time-varying (or planning.time_varying: true in the mission)")
     if args.timing_block_cells is not None and args.timing_block_cells < 1:
         raise LrauvError(f"--timing-block-cells: expected a whole number of cells >= 1; got {args.timing_block_cells}")
+    if args.timing_block_cells is not None and not (base.timing_correction if args.timing_correction is None
+                                                    else args.timing_correction):
+        raise LrauvError("--timing-block-cells: a reference current per block is for the tide's timing; give "
+                         "--timing-correction (or planning.timing_correction: true in the mission)")
     if args.current_error is not None and model != "physical":
         raise LrauvError(f"--current-error: the {model} model has no forecast error to set (its uncertainty is "
                          "--uncertainty); give --model physical")

@@ -1,7 +1,7 @@
 """A policy table's JSON header read back: every value checked, and refused with its key path named
 (docs/policy-table.md). ``planner.contract.table`` turns the fields into a ``PolicyTable``.
 
-Standard library only, as the rest of the table's reading: the executive imports it.
+numpy and the standard library only, as the rest of the table's reading: the executive imports it.
 """
 
 from __future__ import annotations
@@ -78,9 +78,9 @@ def header_fields(header: Any) -> dict[str, Any]:
         fields["slice_times"] = tuple(times)
         if "current_block_cells" in time_part:  # optional: without it, a region is a layer
             k = _int(time_part["current_block_cells"], "time.current_block_cells")
-            if not 1 <= k <= max(nx, ny) or "current_cm_s" not in time_part:
-                raise TableError(f"time.current_block_cells: expected 1 to {max(nx, ny)} cells, with time.current_cm_s;"
-                                 f" got {k}")
+            if k < 1 or "current_cm_s" not in time_part:  # a block larger than the grid is one block a layer
+                raise TableError(f"time.current_block_cells: expected a whole number of cells >= 1, with"
+                                 f" time.current_cm_s; got {k}")
             fields["current_block_cells"] = k
         if "current_cm_s" in time_part:  # optional; older readers never saw it
             block = fields.get("current_block_cells")

@@ -6,6 +6,7 @@ parsed MAVLink messages in this thread, as in test_timeline.py, and its log audi
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
@@ -196,15 +197,18 @@ def test_a_restart_keeps_the_record_and_the_shift(tidal, tmp_path) -> None:
 def test_a_saved_record_reads_back_or_is_refused_by_name() -> None:
     clock = tide_timing.TideClock(record=tide_timing.CurrentRecord(observations=(
         tide_timing.Observation(T0, 0, 0.25, -0.5), tide_timing.Observation(T0 + 60.0, 1, 0.3, 0.0))), shift_s=-1200.0)
-    watch = tide_watch.TideWatch(clock=clock, water_ne_m_s=(0.1, 0.2), since_s=3.0, table_crc32=0xABCD)
+    watch = tide_watch.TideWatch(clock=clock, water_ne_m_s=(0.1, 0.2), since_s=3.0, table_crc32=0xABCD,
+                                 layout=("blocks", 4, 21, 29, -118.26, 33.3, 0.02, 0.02, 0.0, 5.0))
     saved = tide_watch.saved(watch)
-    back = tide_watch.restored(saved)
+    back = tide_watch.restored(json.loads(json.dumps(saved)))  # as state.json holds it
     assert back.clock.record.observations == clock.record.observations and back.clock.shift_s == -1200.0
+    assert back.layout == watch.layout
     assert back.table_crc32 == 0xABCD and back.water_ne_m_s is None  # the command is not kept: the helm sends again
     assert tide_watch.saved(tide_watch.TideWatch()) is None
     for bad, words in (({**saved, "shift_s": 1e6}, "shift_s"), ({**saved, "observations": [[T0, -1, 0.0, 0.0]]}, "observation"),
                        ({**saved, "observations": [[T0, 0, "x", 0.0]]}, "observation"),
-                       ({**saved, "observations": [[T0, 0, 0.0]]}, "observation")):
+                       ({**saved, "observations": [[T0, 0, 0.0]]}, "observation"),
+                       ({**saved, "layout": {"blocks": 4}}, "layout")):
         with pytest.raises(ValueError, match=words):
             tide_watch.restored(bad)
 
@@ -242,6 +246,22 @@ def test_another_table_after_a_shift_is_announced_so_the_audit_drops_the_shift_t
     # Back to the first table: the log's last word was "none" for the other one, so the audit uses none for it too.
     back, event = tide_watch.measured(after, tidal, vehicle, 101.0, T0 + 101.0, 0.0, 0.1, fresh=True, running=True)
     assert event is None and back.shift_for(tidal) == 0.0
+
+
+def test_a_table_that_numbers_its_regions_otherwise_starts_a_record_of_its_own(tidal) -> None:
+    lat, lon = tidal.cell_centre(*(int(x) for x in np.argwhere(tidal.water[0])[0]))
+    vehicle = VehicleState(time_s=100.0, lat_deg=lat, lon_deg=lon, depth_m=0.0, heading_deg=0.0, position_s=100.0)
+    record = tide_timing.CurrentRecord(observations=(tide_timing.Observation(T0 + 40.0, 0, 0.1, 0.0),))
+    w = tide_watch.TideWatch(clock=tide_timing.TideClock(record=record), water_ne_m_s=(0.0, 0.0), since_s=0.0,
+                             table_crc32=tidal.crc32, layout=tide_watch.region_layout(tidal))
+    per_layer = PolicyTable.from_bytes(tidal.with_slices(tidal.slice_times, tidal.slices,
+                                                         tidal.slice_current_m_s * 0.5).to_bytes())
+    kept, _ = tide_watch.measured(w, per_layer, vehicle, 100.0, T0 + 100.0, 0.0, 0.1, fresh=True, running=True)
+    assert kept.clock.record.observations == record.observations  # layers numbered alike: the record goes on
+    current = np.zeros((HOURS, tidal.n_layers * (-(-tidal.ny // 3)) * (-(-tidal.nx // 3)), 2))
+    blocked = PolicyTable.from_bytes(tidal.with_slices(tidal.slice_times, tidal.slices, current, block_cells=3).to_bytes())
+    fresh, _ = tide_watch.measured(w, blocked, vehicle, 100.0, T0 + 100.0, 0.0, 0.1, fresh=True, running=True)
+    assert fresh.clock.record.observations == () and fresh.layout == tide_watch.region_layout(blocked)
 
 
 def test_nothing_is_measured_while_the_helm_does_not_run_the_plan(tidal) -> None:

@@ -339,6 +339,9 @@ def test_slice_currents_per_block_of_cells_read_back_and_say_which_block_a_cell_
     assert back.current_region((1, 4, 0)) == rows * cols + cols  # the next layer, the second block row
     assert back.current_region((timed.n_layers - 1, timed.ny - 1, timed.nx - 1)) == regions - 1
     assert back.slice_table(0).current_block_cells is None
+    huge = PolicyTable.from_bytes(timed.with_slices(HOURS, timed.slices, current[:, :timed.n_layers], block_cells=10_000)
+                                  .to_bytes())  # larger than the grid: one block a layer, written and read alike
+    assert huge.current_blocks() == (1, 1) and huge.current_region((1, timed.ny - 1, timed.nx - 1)) == 1
     with pytest.raises(TableError, match="slice currents"):  # per layer, where blocks were said
         timed.with_slices(HOURS, timed.slices, np.zeros((3, timed.n_layers, 2)), block_cells=4)
 
@@ -346,7 +349,7 @@ def test_slice_currents_per_block_of_cells_read_back_and_say_which_block_a_cell_
         h["time"]["current_block_cells"] = 0
         return h
 
-    with pytest.raises(TableError, match=re.escape("time.current_block_cells: expected 1 to")):
+    with pytest.raises(TableError, match=re.escape("time.current_block_cells: expected a whole number of cells >= 1")):
         PolicyTable.from_bytes(_rewritten(back.to_bytes(), header=header))
 
 

@@ -90,7 +90,12 @@ def test_plan_says_what_it_chose_and_warns_when_most_states_are_unreachable(file
     # Planned with time in the state over the same 6 hours, the advice is the horizon, not time in the state.
     varying = make_plan(replace(request, settings=replace(settings, time_varying=True)))
     warned = [line for line in summary_lines(varying, out=tmp_path / "t.lrpt", size=0) if "fewer than half" in line]
-    assert len(warned) == 1 and "within the 6 h horizon" in warned[0] and "time in the state" not in warned[0]
+    assert len(warned) == 1 and "within the plan's 6 h of slices" in warned[0] and "--horizon-h" in warned[0]
+    assert "time in the state" not in warned[0]
+    # Asked for 12 h of a 6-hour file: the plan says the forecast ends, not that the horizon is short.
+    short = make_plan(replace(request, settings=replace(settings, time_varying=True, horizon_h=12.0)))
+    warned = [line for line in summary_lines(short, out=tmp_path / "t.lrpt", size=0) if "fewer than half" in line]
+    assert len(warned) == 1 and "the forecast ends there (planning.horizon_h asks 12 h)" in warned[0]
 
 
 @pytest.fixture(scope="module")

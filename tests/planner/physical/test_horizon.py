@@ -281,6 +281,9 @@ def test_lrauv_plan_of_the_tidal_mission_carries_the_slices_currents_and_says_so
                  "--horizon-h", "3", "--timing-block-cells", "5", "--out", str(out), "--quiet"]) == 0
     assert "each slice's mean current per block of 5 x 5 cells (15 blocks) carried" in capsys.readouterr().out
     assert PolicyTable.load(out).current_block_cells == 5
+    assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
+                 "--no-timing-correction", "--timing-block-cells", "5", "--out", str(out), "--quiet"]) == 2
+    assert "--timing-block-cells: a reference current per block is for the tide's timing" in capsys.readouterr().err
     assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast),
                  "--timing-correction", "--out", str(tmp_path / "stationary.lrpt"), "--quiet"]) == 2
     assert "--timing-correction: a stationary plan has no slices" in capsys.readouterr().err
