@@ -71,7 +71,7 @@ def test_the_same_dive_as_with_ardusub(demo_plan, synthetic_forecast, tmp_path):
     try:
         ex = ExecThread(demo_plan.table, sim.port, log, on_arrival="surface", yaw_rate_deg_s=YAW_RATE_DEG_S,
                         glide_rate_m_s=GLIDE_RATE_M_S)
-        summary = ex.join(180)
+        summary = ex.join()
     finally:
         sim.stop()
     assert summary is not None and summary.reached, summary

@@ -21,7 +21,7 @@ from planner.shore.replay.audit import audit
 from planner.shore.replay.divelog import open_dive
 from tests.support import REPO
 from tests.support.helpers import wait_until
-from tests.support.loop_rig import ExecThread, Sim
+from tests.support.loop_rig import WALL_LIMIT_S, ExecThread, Sim
 
 pytestmark = pytest.mark.slow
 
@@ -52,7 +52,7 @@ def test_the_executive_finds_the_tide_an_hour_late_and_the_audit_agrees(channel,
     sim = ex = None
     try:
         sim = Sim(truth, (lon, lat), "--heading-deg", "90", "--position-delay-s", "5", "--speedup", "1000")
-        ex = ExecThread(table, sim.port, log, max_wall_s=1200.0)  # a busy machine flies the same dive, slower
+        ex = ExecThread(table, sim.port, log)
         executive = ex.executive
 
         def fitted() -> bool:
@@ -60,7 +60,7 @@ def test_the_executive_finds_the_tide_an_hour_late_and_the_audit_agrees(channel,
 
         # A deadline, not a measurement: lockstep makes the dive the same on any machine, only slower on a busy
         # one; the wait ends as soon as the executive uses the fitted hour (or stops).
-        wait_until(lambda: fitted() or not ex.thread.is_alive(), timeout_s=1200.0)
+        wait_until(lambda: fitted() or not ex.thread.is_alive(), timeout_s=WALL_LIMIT_S)
     finally:
         if ex is not None:
             ex.stop()

@@ -206,7 +206,7 @@ def test_a_two_goal_mission_reaches_both_goals_in_order(demo_plan, synthetic_for
     # At 1000x the simulator's 5 s heartbeat failsafe is 5 ms of wall time; in lockstep (the rig's default)
     # the vehicle waits for the executive, also while it plans goal 1 onboard, so it stays on.
     rig = Live(synthetic_forecast, plan, tmp_path / "exec.mcap", start=(lon, lat), exit_on_arrival=True, speedup=1000.0)
-    summary = rig.join(120.0)
+    summary = rig.join()
     assert summary.reached and rig.executive.plan.index == 1
     events = _events(tmp_path / "exec.mcap")
     on_to = [n for n, e in enumerate(events) if "goal 0 reached: on to goal 1" in e]

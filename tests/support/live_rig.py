@@ -27,6 +27,9 @@ from vehicle_sim.world import World  # noqa: E402
 
 DEMO = DEMO_MISSION
 SPEEDUP = 200.0
+# The executive's wall-time limit and the longest wait for its end: a safety net for a run gone wrong, far above
+# what a busy 2-core machine needs (lockstep makes the run itself the same on any machine).
+WALL_LIMIT_S = 600.0
 
 
 class Live:
@@ -45,7 +48,7 @@ class Live:
                                                              autopilot=autopilot or AutopilotSettings(),
                                                              lockstep_slack_s=lockstep_slack_s))
         config = ExecConfig(link=f"udpout:127.0.0.1:{self.sim.port}", log_path=log, gcs_link="udpin:127.0.0.1:0",
-                            mission_path=mission, watch_dir=watch, work_dir=log.parent / "work", max_wall_s=120.0,
+                            mission_path=mission, watch_dir=watch, work_dir=log.parent / "work", max_wall_s=WALL_LIMIT_S,
                             exit_on_arrival=exit_on_arrival, linger_s=5.0, replan_period_s=replan_period_s,
                             signing=signing, helm=HelmConfig(**helm))
         try:
@@ -75,7 +78,7 @@ class Live:
     def running(self) -> bool:
         return self.executive.helm.phase is Phase.RUNNING and self.executive._counts["decisions"] > 5
 
-    def join(self, timeout_s: float = 120.0):  # type: ignore[no-untyped-def]
+    def join(self, timeout_s: float = WALL_LIMIT_S):  # type: ignore[no-untyped-def]
         self._thread.join(timeout_s)
         return self.stop()
 

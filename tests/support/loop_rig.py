@@ -44,8 +44,13 @@ class Sim:
         return self.proc.returncode
 
 
+WALL_LIMIT_S = 600.0  # the executive's wall-time limit in these rigs, and the longest wait for its end
+
+
 class ExecThread:
-    def __init__(self, table, port: int, log: Path, *, max_wall_s: float = 90.0, **helm) -> None:  # type: ignore[no-untyped-def]
+    # Safety nets, not measurements: a run ends at arrival (lockstep makes it the same dive on any machine); these
+    # only stop a run that went wrong, so they are far above what a busy 2-core machine needs.
+    def __init__(self, table, port: int, log: Path, *, max_wall_s: float = WALL_LIMIT_S, **helm) -> None:  # type: ignore[no-untyped-def]
         config = ExecConfig(link=f"udpout:127.0.0.1:{port}", log_path=log, exit_on_arrival=True, linger_s=20.0,
                             max_wall_s=max_wall_s, helm=HelmConfig(**helm))
         self.executive = Executive(config, table)
@@ -57,7 +62,7 @@ class ExecThread:
     def _run(self) -> None:
         self.summary = self.executive.run(self.stop_event)
 
-    def join(self, timeout: float = 120.0):  # type: ignore[no-untyped-def]
+    def join(self, timeout: float = WALL_LIMIT_S):  # type: ignore[no-untyped-def]
         self.thread.join(timeout)
         if self.thread.is_alive():
             self.stop_event.set()
