@@ -482,8 +482,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
 
     sampled = [0]  # slices sampled so far, whatever order the solver asks for them in
     block = settings.timing_block_cells
-    rows, cols = (1, 1) if block is None else (-(-grid.ny // block), -(-grid.nx // block))
-    current = np.zeros((len(steps), grid.n_layers * rows * cols, 2))  # each slice's mean current per region, for the tide's timing
+    current: list[NDArray[np.float64]] = [np.zeros(0)] * len(steps)  # each slice's mean current per region, for the tide's timing
 
     def model_at(n: int) -> PhysicalModel:
         uf, vf = (uf0, vf0) if n == 0 else resample(forecast, fine, time_index=forecast.step_index(steps[n]))
@@ -509,7 +508,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
     table = PolicyTable.from_solution(
         solution, forecast_source=forecast.source, forecast_identity=forecast.identity,
         forecast_time=slice_times[0],
-    ).with_slices(slice_times, horizon.action, current if settings.timing_correction else None,
+    ).with_slices(slice_times, horizon.action, np.stack(current) if settings.timing_correction else None,
                   block_cells=block)
     return PlanResult(forecast=forecast, time_index=index, grid=grid, u_m_s=u, v_m_s=v, model=solution.model,
                       solution=solution, table=table, timings_s=timings, horizon=horizon, error=error)

@@ -243,13 +243,13 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
             raise LrauvError(f"{flag}: expected a number of hours > 0; got {value:g}")
     measured = base.error_measured
     physical = base.physical
+    timing_correction = base.timing_correction if args.timing_correction is None else args.timing_correction
     if args.timing_correction and not (args.time_varying or base.time_varying):
         raise LrauvError("--timing-correction: a stationary plan has no slices to look up earlier or later; give "
                          "--time-varying (or planning.time_varying: true in the mission)")
     if args.timing_block_cells is not None and args.timing_block_cells < 1:
         raise LrauvError(f"--timing-block-cells: expected a whole number of cells >= 1; got {args.timing_block_cells}")
-    if args.timing_block_cells is not None and not (base.timing_correction if args.timing_correction is None
-                                                    else args.timing_correction):
+    if args.timing_block_cells is not None and not timing_correction:
         raise LrauvError("--timing-block-cells: a reference current per block is for the tide's timing; give "
                          "--timing-correction (or planning.timing_correction: true in the mission)")
     if args.current_error is not None and model != "physical":
@@ -275,7 +275,7 @@ def plan_request(args: argparse.Namespace, mission: Any) -> Any:
         costs=cost,
         calm_speed_m_s=base.calm_speed_m_s if args.calm_speed is None else args.calm_speed,
         time_varying=bool(args.time_varying) or base.time_varying,
-        timing_correction=base.timing_correction if args.timing_correction is None else args.timing_correction,
+        timing_correction=timing_correction,
         timing_block_cells=base.timing_block_cells if args.timing_block_cells is None else args.timing_block_cells,
         horizon_h=base.horizon_h if args.horizon_h is None else args.horizon_h,
         slice_h=base.slice_h if args.slice_h is None else args.slice_h,

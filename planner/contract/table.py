@@ -28,7 +28,7 @@ from planner.contract.actions import FORWARD_ACTIONS, Action
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import TableError
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
-from planner.contract.table_header import MAX_STATES, header_fields, slice_unix_s
+from planner.contract.table_header import MAX_STATES, block_shape, header_fields, slice_unix_s
 
 MAGIC = b"LRAUVPT\x00"
 FORMAT_VERSION = 1  # a stationary plan; its files are what they always were
@@ -216,8 +216,7 @@ class PolicyTable:
 
     def current_blocks(self) -> tuple[int, int]:
         """(rows, columns) of current regions in a layer: blocks of ``current_block_cells``, or the whole layer."""
-        k = self.current_block_cells
-        return (1, 1) if k is None else (-(-self.ny // k), -(-self.nx // k))
+        return block_shape(self.ny, self.nx, self.current_block_cells)
 
     @property
     def n_current_regions(self) -> int:

@@ -20,6 +20,12 @@ MAX_SLICES = 10_000
 MAX_STATES = 1 << 31
 
 
+def block_shape(ny: int, nx: int, block_cells: int | None) -> tuple[int, int]:
+    """(rows, columns) of the current's regions in a layer of ``ny`` x ``nx`` cells: blocks of ``block_cells``
+    cells a side from cell (0, 0), the last ones smaller where it does not divide the grid; None: the whole layer."""
+    return (1, 1) if block_cells is None else (-(-ny // block_cells), -(-nx // block_cells))
+
+
 def header_fields(header: Any) -> dict[str, Any]:
     """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value."""
     top = _section(header, "")
@@ -83,8 +89,8 @@ def header_fields(header: Any) -> dict[str, Any]:
                                  f" time.current_cm_s; got {k}")
             fields["current_block_cells"] = k
         if "current_cm_s" in time_part:  # optional; older readers never saw it
-            block = fields.get("current_block_cells")
-            regions = len(depths) * (1 if block is None else -(-ny // block) * -(-nx // block))
+            rows, cols = block_shape(ny, nx, fields.get("current_block_cells"))
+            regions = len(depths) * rows * cols
             fields["slice_current_m_s"] = _slice_current(time_part["current_cm_s"], len(times), regions)
     if "nominal_path" in top:  # optional; older readers never saw it
         fields["nominal_path"] = _lon_lat_points(_key(_section(top["nominal_path"], "nominal_path"), "lon_lat_deg",
