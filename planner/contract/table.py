@@ -28,7 +28,7 @@ from planner.contract.actions import FORWARD_ACTIONS, Action
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import TableError
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
-from planner.contract.table_header import MAX_STATES, block_shape, header_fields, slice_unix_s
+from planner.contract.table_header import CURRENT_IN_PAYLOAD, MAX_STATES, block_shape, header_fields, slice_unix_s
 
 MAGIC = b"LRAUVPT\x00"
 FORMAT_VERSION = 1  # a stationary plan; its files are what they always were
@@ -143,6 +143,9 @@ class PolicyTable:
             if self.slices is None or self.slice_current_m_s.shape != expected:
                 raise TableError(f"table slice currents: expected {expected} for a time-varying table; got "
                                  f"{self.slice_current_m_s.shape}{'' if self.slices is not None else ' on a stationary one'}")
+            if not np.all(np.abs(self.slice_current_m_s) <= _CURRENT_LIMIT_M_S):  # NaN fails too
+                raise TableError(f"table slice currents: expected finite currents within +-{_CURRENT_LIMIT_M_S} m/s"
+                                 f" (whole cm/s in 16 bits); got {self.slice_current_m_s.ravel()[:6].tolist()} ...")
             self.slice_current_m_s.setflags(write=False)
         dx_m, dy_m = cell_size_m(self.lat_deg, self.dlon_deg, self.dlat_deg)
         bearings = bearings_deg(dx_m, dy_m)
@@ -427,8 +430,7 @@ class PolicyTable:
             time_part: dict[str, Any] = {"slices_utc": list(self.slice_times), "lookup": "nearest"}
             out["time"] = time_part
             if self.slice_current_m_s is not None:  # optional; older readers never saw it
-                time_part["current_cm_s"] = [[[round(float(c) * 100.0) for c in region] for region in when]
-                                               for when in self.slice_current_m_s]
+                time_part["current_cm_s"] = CURRENT_IN_PAYLOAD
                 if self.current_block_cells is not None:  # optional: without it, a region is a layer
                     time_part["current_block_cells"] = self.current_block_cells
         if self.nominal_path:  # optional: a table planned without a start keeps the bytes it always had
@@ -440,6 +442,8 @@ class PolicyTable:
         """Serialise: preamble, JSON header, 1-bit water mask + 4-bit actions, CRC32."""
         header = json.dumps(self.header(), sort_keys=True, separators=(",", ":")).encode("utf-8")
         raw = _pack_payload(self.water, self.actions if self.slices is None else _deltas(self.slices))
+        if self.slice_current_m_s is not None:
+            raw += _pack_current(self.slice_current_m_s)
         version = FORMAT_VERSION if self.slices is None else TIMED_VERSION
         flag = 0 if not compress else FLAG_ZLIB if self.slices is None else FLAG_XZ
         stored = (raw if not compress else zlib.compress(raw, 9) if flag == FLAG_ZLIB
@@ -501,11 +505,12 @@ class PolicyTable:
         if n_states * n_slices > MAX_STATES:
             raise TableError(f"{name}: {n_slices} slices of {n_states:,} states exceed the limit of {MAX_STATES:,} actions")
         shape = (len(fields["depth_m"]), fields["ny"], fields["nx"])
-        expected = _payload_len(shape[0] * shape[1] * shape[2], n_slices)
+        regions = fields.pop("payload_current_regions", 0)
+        expected = _payload_len(shape[0] * shape[1] * shape[2], n_slices, regions)
         if raw_len != expected:
             raise TableError(
                 f"{name}: payload declared as {raw_len:,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
-                f"{N_HEADINGS} needs {expected:,}"
+                f"{N_HEADINGS}{f' and {regions} regions of slice currents' if regions else ''} needs {expected:,}"
             )
         stored = data[pos + _PAYLOAD.size : end]
         if flags & FLAG_ZLIB:
@@ -537,6 +542,10 @@ class PolicyTable:
                 f"{name}: payload is {len(raw):,} bytes but the grid {shape[0]} x {shape[1]} x {shape[2]} x "
                 f"{N_HEADINGS} needs {expected:,}"
             )
+        if regions:
+            current_bytes = n_slices * regions * _CURRENT_BYTES
+            fields["slice_current_m_s"] = _unpack_current(raw[-current_bytes:], n_slices, regions)
+            raw = raw[:-current_bytes]
         water, actions = _unpack_payload(raw, shape, n_slices)
         if n_slices > 1:
             actions = np.bitwise_xor.accumulate(actions, axis=0)  # each slice was stored as its change from the one before
@@ -589,8 +598,31 @@ def read_table_file(path: str | os.PathLike[str]) -> bytes:
         raise TableError(f"{path}: cannot read the policy table: {exc.strerror or exc}") from None
 
 
-def _payload_len(n_cells: int, n_slices: int = 1) -> int:
-    return (n_cells + 7) // 8 + n_slices * ((n_cells * N_HEADINGS + 1) // 2)
+def _payload_len(n_cells: int, n_slices: int = 1, current_regions: int = 0) -> int:
+    return (n_cells + 7) // 8 + n_slices * ((n_cells * N_HEADINGS + 1) // 2 + current_regions * _CURRENT_BYTES)
+
+
+# Slice currents in the payload: per slice, region and component (east, north) a little-endian int16 of cm/s.
+_CURRENT_BYTES = 4  # per slice and region
+_CURRENT_LIMIT_M_S = 327.67
+
+
+def _pack_current(current_m_s: NDArray[np.float64]) -> bytes:
+    """(T, R, 2) currents as whole cm/s: the first slice, then each slice less the one before, in int16
+    arithmetic that wraps (a reader's running sum wraps back): hourly means change by a few cm/s, so
+    most of these bytes are alike and compress with the actions."""
+    cm_s = np.round(np.asarray(current_m_s) * 100.0).astype(np.int64)
+    step = cm_s.copy()
+    step[1:] -= cm_s[:-1]
+    return step.astype("<i2").tobytes()  # int64 to int16 keeps the low 16 bits: the wrapped difference
+
+
+def _unpack_current(raw: bytes, n_slices: int, n_regions: int) -> NDArray[np.float64]:
+    """Inverse of ``_pack_current``: (T, R, 2) in m/s."""
+    step = np.frombuffer(raw, dtype="<i2").reshape(n_slices, n_regions, 2)
+    with np.errstate(over="ignore"):
+        cm_s = np.cumsum(step, axis=0, dtype=np.int16)  # wraps as the writer's differences did
+    return cm_s.astype(np.float64) / 100.0
 
 
 def _deltas(slices: NDArray[np.uint8]) -> NDArray[np.uint8]:

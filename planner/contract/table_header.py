@@ -18,6 +18,9 @@ from planner.contract.headings import N_HEADINGS
 
 MAX_SLICES = 10_000
 MAX_STATES = 1 << 31
+# ``time.current_cm_s`` of a table whose slice currents follow the actions in the payload (docs/policy-table.md):
+# compressed with them, they take a fifth of the header's JSON lists.
+CURRENT_IN_PAYLOAD = "payload"
 
 
 def block_shape(ny: int, nx: int, block_cells: int | None) -> tuple[int, int]:
@@ -27,7 +30,10 @@ def block_shape(ny: int, nx: int, block_cells: int | None) -> tuple[int, int]:
 
 
 def header_fields(header: Any) -> dict[str, Any]:
-    """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value."""
+    """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value.
+
+    One key is not a field: ``payload_current_regions``, the regions whose slice currents the payload
+    carries (``time.current_cm_s`` is ``CURRENT_IN_PAYLOAD``)."""
     top = _section(header, "")
     g = _section(_key(top, "grid", ""), "grid")
     nx, ny = _int(_key(g, "nx", "grid"), "grid.nx"), _int(_key(g, "ny", "grid"), "grid.ny")
@@ -91,7 +97,10 @@ def header_fields(header: Any) -> dict[str, Any]:
         if "current_cm_s" in time_part:  # optional; older readers never saw it
             rows, cols = block_shape(ny, nx, fields.get("current_block_cells"))
             regions = len(depths) * rows * cols
-            fields["slice_current_m_s"] = _slice_current(time_part["current_cm_s"], len(times), regions)
+            if time_part["current_cm_s"] == CURRENT_IN_PAYLOAD:  # the reader takes them from the payload
+                fields["payload_current_regions"] = regions
+            else:  # JSON lists, as the first tables with currents were written
+                fields["slice_current_m_s"] = _slice_current(time_part["current_cm_s"], len(times), regions)
     if "nominal_path" in top:  # optional; older readers never saw it
         fields["nominal_path"] = _lon_lat_points(_key(_section(top["nominal_path"], "nominal_path"), "lon_lat_deg",
                                                       "nominal_path"), "nominal_path.lon_lat_deg")
@@ -114,7 +123,8 @@ def _slice_current(value: Any, n_slices: int, n_regions: int) -> NDArray[np.floa
     """``time.current_cm_s``: per slice, per region (a layer, or a block of one), [east, north] as whole cm/s."""
     key = "time.current_cm_s"
     if not isinstance(value, list) or len(value) != n_slices:
-        raise TableError(f"{key}: expected one entry per slice ({n_slices}); got {repr(value)[:80]}")
+        raise TableError(f"{key}: expected \"{CURRENT_IN_PAYLOAD}\" or one entry per slice ({n_slices});"
+                         f" got {repr(value)[:80]}")
     out = np.empty((n_slices, n_regions, 2))
     for n, when in enumerate(value):
         if not isinstance(when, list) or len(when) != n_regions:

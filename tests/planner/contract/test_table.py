@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import lzma
 import math
 import re
@@ -321,11 +322,61 @@ def test_a_time_varying_table_carries_its_slices_currents_to_the_cm_s(timed):
     back = PolicyTable.from_bytes(table.to_bytes())
     assert back.slice_current_m_s is not None
     assert np.allclose(back.slice_current_m_s, np.round(current, 2)) and np.allclose(back.slice_current_m_s, current, atol=0.005)
-    assert back.header()["time"]["current_cm_s"][0][0] == [round(current[0, 0, 0] * 100), round(current[0, 0, 1] * 100)]
+    assert back.header()["time"]["current_cm_s"] == "payload"
+    # The payload ends in them: int16 cm/s, the first slice, then each slice less the one before.
+    tail = np.frombuffer(lzma.decompress(table.to_bytes()[24 + _header_len(table):-4])[-3 * L * 4:], "<i2")
+    cm_s = np.round(current * 100).astype(int)
+    assert tail.reshape(3, L, 2).tolist() == np.concatenate([cm_s[:1], np.diff(cm_s, axis=0)]).tolist()
     assert back.to_bytes() == table.to_bytes()
     assert back.slice_table(1).slice_current_m_s is None  # a slice is a stationary plan
     assert "current_cm_s" not in timed.header()["time"]  # without them, the bytes they always had
+    assert len(timed.to_bytes(compress=False)) + 3 * L * 4 + len('"current_cm_s":"payload",') == len(table.to_bytes(compress=False))
     assert "current_block_cells" not in back.header()["time"] and back.current_region((1, 5, 7)) == 1
+
+
+def test_slice_currents_at_the_ends_of_16_bits_round_trip_and_beyond_them_are_refused(timed):
+    L = timed.n_layers
+    current = np.zeros((3, L, 2))
+    current[0, 0, 0], current[1, 0, 0], current[2, 0, 0] = 327.67, -327.67, 327.67  # steps beyond 16 bits wrap back
+    back = PolicyTable.from_bytes(timed.with_slices(HOURS, timed.slices, current).to_bytes())
+    assert np.array_equal(back.slice_current_m_s, current)
+    current[2, 0, 1] = 327.68
+    with pytest.raises(TableError, match=re.escape("within +-327.67 m/s")):
+        timed.with_slices(HOURS, timed.slices, current)
+    current[2, 0, 1] = np.nan
+    with pytest.raises(TableError, match=re.escape("within +-327.67 m/s")):
+        timed.with_slices(HOURS, timed.slices, current)
+
+
+def test_a_table_with_its_slice_currents_in_the_header_still_reads(timed):
+    """The first tables with slice currents carried them as JSON lists in the header."""
+    L = timed.n_layers
+    current = np.linspace(-0.834, 0.917, 3 * L * 2).reshape(3, L, 2)
+    table = timed.with_slices(HOURS, timed.slices, current)
+    old = _header_currents(table)
+    assert json.loads(old[16:16 + _header_len(table, old)])["time"]["current_cm_s"][1][0] == \
+        [round(current[1, 0, 0] * 100), round(current[1, 0, 1] * 100)]
+    back = PolicyTable.from_bytes(old)
+    assert np.array_equal(back.slice_current_m_s, table.slice_current_m_s) and np.array_equal(back.slices, table.slices)
+    assert back.to_bytes() == table.to_bytes()  # written again, the current form
+    with pytest.raises(TableError, match=re.escape(f"and {L} regions of slice currents needs")):  # the currents cut off
+        PolicyTable.from_bytes(_rewritten(table.to_bytes(), payload=lambda p: p[:-3 * L * 4]))
+
+
+def _header_len(table: PolicyTable, data: bytes | None = None) -> int:
+    return int.from_bytes((table.to_bytes() if data is None else data)[12:16], "little")
+
+
+def _header_currents(table: PolicyTable) -> bytes:
+    """``table``'s file as the first tables with slice currents were written: JSON lists in the header."""
+    assert table.slice_current_m_s is not None
+    cm_s = np.round(table.slice_current_m_s * 100).astype(int).tolist()
+
+    def header(h):  # type: ignore[no-untyped-def]
+        h["time"]["current_cm_s"] = cm_s
+        return h
+
+    return _rewritten(table.to_bytes(), header=header, payload=lambda p: p[:-table.slice_current_m_s.size * 2])
 
 
 def test_slice_currents_per_block_of_cells_read_back_and_say_which_block_a_cell_is_in(timed):
@@ -367,7 +418,9 @@ def test_bad_slice_currents_are_refused_by_name(timed, bad, key):
         return h
 
     with pytest.raises(TableError, match=re.escape(key)):
-        PolicyTable.from_bytes(_rewritten(table.to_bytes(), header=header))
+        PolicyTable.from_bytes(_rewritten(_header_currents(table), header=header))
+    with pytest.raises(TableError, match=re.escape('time.current_cm_s: expected "payload" or one entry per slice')):
+        PolicyTable.from_bytes(_rewritten(table.to_bytes(), header=lambda h: {**h, "time": {**h["time"], "current_cm_s": "x"}}))
 
 
 def test_slice_currents_need_a_time_varying_table_of_their_shape(demo_plan, timed):
