@@ -73,8 +73,9 @@ def add_parser(sub: Subcommands) -> None:
                       help="time-varying plan: carry each slice's mean current, so the vehicle fits the tide's timing "
                            "to the current it meets (default: the mission's planning.timing_correction)")
     plan.add_argument("--timing-block-cells", type=int, metavar="N",
-                      help="with --timing-correction: a reference current per block of N x N cells in each layer, not"
-                           " one mean per layer (default: the mission's planning.timing_block_cells)")
+                      help="with --timing-correction: the reference current is the mean per block of N x N cells in each"
+                           " layer; as large as the grid, one mean per layer (default: the mission's"
+                           " planning.timing_block_cells, or 4)")
     plan.add_argument("--current-error", metavar="M_S|measured",
                       help="physical model: forecast error per current component, m/s, or 'measured' from the data")
     plan.add_argument("--previous-forecast", metavar="FILE|URL",

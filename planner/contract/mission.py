@@ -22,6 +22,7 @@ from planner.contract.geodesy import BBox, swap_hint
 from planner.contract.settings import (
     BREACH_ACTION_OPTIONS,
     CRITERIA,
+    DEFAULT_TIMING_BLOCK_CELLS,
     MODEL_OPTIONS,
     ON_ARRIVAL_OPTIONS,
     UNCERTAINTY_OPTIONS,
@@ -433,7 +434,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         raise doc.error("planning.time_varying", f"needs planning.model physical (its transitions carry durations); got {model!r}")
     timing_correction = pl.boolean("timing_correction", False)
     timing_block = pl.integer("timing_block_cells", minimum=1) if pl.has("timing_block_cells") else None
-    if timing_block is not None and not timing_correction:
+    if timing_block is not None and not timing_correction:  # a key that would do nothing: refused, not ignored
         raise doc.error("planning.timing_block_cells", "a reference current per block is for the tide's timing: it needs"
                                                        " planning.timing_correction: true")
     settings = PlanSettings(
@@ -448,7 +449,7 @@ def load_mission(path: str | os.PathLike[str]) -> Mission:
         horizon_h=pl.number("horizon_h", 72.0, minimum=1, unit="h"),
         slice_h=pl.number("slice_h", minimum=0.01, unit="h") if pl.has("slice_h") else None,
         timing_correction=timing_correction,
-        timing_block_cells=timing_block,
+        timing_block_cells=DEFAULT_TIMING_BLOCK_CELLS if timing_block is None else timing_block,
         error_measured=_measured(pl),
     )
 

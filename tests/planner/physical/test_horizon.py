@@ -228,12 +228,16 @@ def test_with_timing_correction_the_table_carries_each_slices_mean_current(gyre_
 
     plain = make_plan(gyre_request(gyre_file, horizon_h=2.0)).table
     assert plain.slice_current_m_s is None  # off by default: the bytes a time-varying table always had
-    result = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True))
+    result = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True, timing_block_cells=1000))
     table = PolicyTable.from_bytes(result.table.to_bytes())
-    assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (3, 2, 2)
+    assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (3, 2, 2)  # a block a layer
     assert np.array_equal(table.slices, plain.slices)  # the plan is the same; only the lookup may shift
     # Slice 0's is the mean of the planning grid's water currents, to the cm/s.
     assert np.allclose(table.slice_current_m_s[0], region_mean_current(result.u_m_s, result.v_m_s), atol=0.005)
+    # By default, blocks of 4 x 4 cells: the 9 x 5 grid is 2 x 3 blocks a layer.
+    default = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True)).table
+    assert default.current_block_cells == 4 and default.current_blocks() == (2, 3)
+    assert default.slice_current_m_s is not None and default.slice_current_m_s.shape == (3, 12, 2)
     # Per block of 3 x 3 cells: each block's own mean, looked up by the cell's block.
     blocked = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True, timing_block_cells=3))
     back = PolicyTable.from_bytes(blocked.table.to_bytes())
@@ -268,11 +272,12 @@ def test_lrauv_plan_of_the_tidal_mission_carries_the_slices_currents_and_says_so
     assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
                  "--horizon-h", "3", "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
-    assert "timing     each slice's mean current per layer carried" in printed
     table = PolicyTable.load(out)
-    assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (4, 1, 2)
-    # The channel's flood runs east along it: the mean current of the first slice is eastward and strong.
-    assert table.slice_current_m_s[0, 0, 0] > 0.2
+    regions = table.n_current_regions
+    assert f"timing     each slice's mean current per block of 4 x 4 cells ({regions} blocks) carried" in printed
+    assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (4, regions, 2) and regions > 1
+    # The channel's flood runs east along it: the first slice's current is eastward, strong in the channel's middle.
+    assert table.slice_current_m_s[0, table.current_region((0, table.ny // 2, table.nx // 2)), 0] > 0.2
     # The flag overrides the mission's key, either way; on a stationary plan it is refused, not ignored.
     assert main(["plan", str(REPO / "missions" / "eval-tidal.yaml"), "--forecast", str(forecast), "--time-varying",
                  "--horizon-h", "3", "--no-timing-correction", "--out", str(out), "--quiet"]) == 0
