@@ -176,8 +176,9 @@ def _slices(table: PolicyTable, n: int, rng: np.random.Generator) -> np.ndarray:
     return stack
 
 
-def _rewritten(data: bytes, *, version: int | None = None, header=lambda h: h, payload=lambda p: p) -> bytes:  # type: ignore[no-untyped-def]
-    """A table file with its version, header or raw payload changed, its lengths and CRC made right again."""
+def _rewritten(data: bytes, *, version: int | None = None, header=lambda h: h, payload=lambda p: p,  # type: ignore[no-untyped-def]
+               new_flags=lambda f: f) -> bytes:
+    """A table file with its version, header, raw payload or flags changed, its lengths and CRC made right again."""
     import json
     import struct
 
@@ -189,7 +190,7 @@ def _rewritten(data: bytes, *, version: int | None = None, header=lambda h: h, p
     if flags & 2 and version == 1:  # xz is version 2's alone: a version-1 rewrite stores zlib
         flags = 1
     stored = zlib.compress(raw, 9) if flags & 1 else lzma.compress(raw) if flags & 2 else raw
-    body = (struct.pack("<8sHHI", magic, ver if version is None else version, flags, len(head)) + head
+    body = (struct.pack("<8sHHI", magic, ver if version is None else version, new_flags(flags), len(head)) + head
             + struct.pack("<II", len(stored), len(raw)) + stored)
     return body + zlib.crc32(body).to_bytes(4, "little")
 
@@ -209,6 +210,7 @@ def test_a_time_varying_table_round_trips_as_version_2(timed, compress):
     assert np.array_equal(back.actions, timed.slices[0]) and np.array_equal(back.water, timed.water)
     assert back.header()["time"] == {"slices_utc": list(HOURS), "lookup": "nearest"}
     assert back.to_bytes(compress=compress) == data
+    assert int.from_bytes(data[10:12], "little") == (0x0006 if compress else 0x0004)  # xz; whole slices
     assert back.slice_unix_s == (T0, T0 + 3600.0, T0 + 7200.0)
     for n in range(3):  # each slice is a stationary table with the file's identity
         view = back.slice_table(n)
@@ -280,8 +282,31 @@ def test_a_land_cell_with_an_action_in_a_later_slice_is_refused(demo_plan, timed
         PolicyTable.from_bytes(bad, name="t.lrpt")
 
 
+def test_the_first_version_2_files_with_each_slice_as_its_change_from_the_one_before_still_read(timed):
+    """Without flag 0x0004 a later slice is its XOR with the slice before (the first version 2 files)."""
+    assert timed.slices is not None
+    n_mask = (timed.water.size + 7) // 8
+    per_slice = timed.slices[0].size // 2
+
+    def xor_deltas(p: bytes) -> bytes:
+        packed = np.frombuffer(p[n_mask:], dtype=np.uint8).reshape(3, per_slice).copy()
+        packed[1:] ^= packed[:-1].copy()  # nibble by nibble, as byte by byte
+        return p[:n_mask] + packed.tobytes()
+
+    for compress in (True, False):
+        old = _rewritten(timed.to_bytes(compress=compress), payload=xor_deltas, new_flags=lambda f: f & ~0x0004)
+        back = PolicyTable.from_bytes(old)
+        assert back.slices is not None and np.array_equal(back.slices, timed.slices)
+    # Read as whole slices, the deltas would be other actions (land's UNREACHABLE XOR itself is DRIFT):
+    # the flag is what tells the two apart.
+    with pytest.raises(TableError, match="land cells must carry UNREACHABLE"):
+        PolicyTable.from_bytes(_rewritten(old, new_flags=lambda f: f | 0x0004))
+    with pytest.raises(TableError, match=re.escape("whole slices (0x0004) are version 2's alone")):
+        PolicyTable.from_bytes(_rewritten(timed.slice_table(0).to_bytes(), new_flags=lambda f: f | 0x0004))
+
+
 def test_slices_that_barely_change_cost_little_more_than_one(demo_plan):
-    """Each later slice is stored as its change from the one before: unchanged states compress to almost nothing."""
+    """xz finds each slice's match in the slice before: unchanged states compress to almost nothing."""
     table = demo_plan.table
     one = len(table.to_bytes())
     same = len(table.with_slices(tuple(f"2026-01-15T{h:02d}:00:00Z" for h in range(10)),
@@ -289,7 +314,7 @@ def test_slices_that_barely_change_cost_little_more_than_one(demo_plan):
     assert same < 1.5 * one, (same, one)
     few = len(table.with_slices(tuple(f"2026-01-15T{h:02d}:00:00Z" for h in range(10)),
                                 _slices(table, 10, np.random.default_rng(3))).to_bytes())
-    assert same < few  # the deltas carry the changes, nothing else
+    assert same < few  # the changes are what costs
 
 
 def test_a_nominal_path_round_trips_and_a_bad_one_is_refused(demo_plan):
