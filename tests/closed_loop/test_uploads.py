@@ -31,7 +31,7 @@ from planner.contract.settings import Goal  # noqa: E402
 from planner.contract.mission import goals_to_items  # noqa: E402
 
 from tests.support.helpers import DEMO_MISSION, plan_for, start_west_of_goal  # noqa: E402
-from tests.support.live_rig import Live, following  # noqa: E402
+from tests.support.live_rig import WALL_LIMIT_S, Live, following  # noqa: E402
 
 DEMO = DEMO_MISSION
 
@@ -147,7 +147,9 @@ def test_a_new_forecast_in_the_watched_directory_is_planned_off_loop_and_swapped
     staging = tmp_path / "issue1.nc"
     write_synthetic(staging, SyntheticSettings(seed=0, hours=24), issue_number=1)
     os.replace(staging, inbox / "issue1.nc")  # appears whole, as a forecast feed should deliver it
-    assert live.wait(lambda: live.executive.swaps, 60.0), "no swap after a new forecast"
+    # An onboard plan is a child process: seconds on a quiet machine, a minute or more on a busy one. The
+    # wait ends at the swap; its limit is the rig's safety net, not a deadline.
+    assert live.wait(lambda: live.executive.swaps, WALL_LIMIT_S), "no swap after a new forecast"
     swap = live.executive.swaps[-1]
     assert swap["source"] == "onboard plan (new forecast issue1.nc)"
     assert swap["previous"]["table_crc32"] == f"{running.crc32:08x}" and swap["table_crc32"] != swap["previous"]["table_crc32"]
@@ -230,7 +232,7 @@ def test_a_forecast_uploaded_by_ftp_is_planned_onboard_and_swapped_in(live, tmp_
         put_file(conn, blob, "/forecasts/issue1.nc", timeout_s=2.0)
     finally:
         conn.close()
-    assert live.wait(lambda: live.executive.swaps, 60.0), "no swap after an uploaded forecast"
+    assert live.wait(lambda: live.executive.swaps, WALL_LIMIT_S), "no swap after an uploaded forecast"  # planned onboard
     swap = live.executive.swaps[-1]
     assert swap["source"] == "onboard plan (new forecast issue1.nc)" and swap["forecast_identity"] != running.forecast_identity
     assert (live.executive.config.work_dir / "forecasts" / "issue1.nc").read_bytes() == blob
@@ -243,7 +245,7 @@ def test_replanning_on_a_period(demo_plan, synthetic_forecast, tmp_path):
                replan_period_s=600.0)  # 3 s of wall time at 200x
     try:
         # Each onboard plan is a child process: 40 s of wall time each on a busy 2-core machine.
-        assert rig.wait(lambda: len(rig.executive.swaps) >= 2, 300.0), rig.executive.swaps
+        assert rig.wait(lambda: len(rig.executive.swaps) >= 2, WALL_LIMIT_S), rig.executive.swaps
     finally:
         rig.stop()
     assert [w["source"] for w in rig.executive.swaps[:2]] == ["onboard plan (period)"] * 2
