@@ -37,8 +37,8 @@ def check_choice(name: str, value: str, options: tuple[ChoiceT, ...]) -> ChoiceT
     raise ContractError(f"{name}: expected one of {', '.join(options)}; got {value!r}")
 
 
-
 DEFAULT_TIMING_BLOCK_CELLS = 4  # PlanSettings.timing_block_cells
+
 
 @dataclass(frozen=True, kw_only=True)
 class Costs:

@@ -28,13 +28,14 @@ from planner.contract.actions import FORWARD_ACTIONS, Action
 from planner.contract.atomic import write_atomic
 from planner.contract.errors import TableError
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
-from planner.contract.table_header import CURRENT_IN_PAYLOAD, MAX_STATES, block_shape, header_fields, slice_unix_s
+from planner.contract.table_header import (CURRENT_IN_PAYLOAD, MAX_CURRENT_PAIRS, MAX_STATES, block_shape, header_fields,
+                                           slice_unix_s)
 
 MAGIC = b"LRAUVPT\x00"
 FORMAT_VERSION = 1  # a stationary plan; its files are what they always were
 TIMED_VERSION = 2  # a time-varying plan: one slice of actions per forecast time (docs/policy-table.md)
 FLAG_ZLIB = 0x0001
-# Version 2 only: the payload is an xz (LZMA2) stream, 28 % smaller than zlib's on the demo's 73
+# Version 2 only: the payload is an xz (LZMA2) stream, 45 % smaller than zlib's on the demo's 73
 # hourly slices; xz is in Python's standard library, so the vehicle side needs nothing more.
 FLAG_XZ = 0x0002
 # Version 2 only: each slice's actions are stored whole, not as their change from the slice before.
@@ -148,9 +149,12 @@ class PolicyTable:
             if self.slices is None or self.slice_current_m_s.shape != expected:
                 raise TableError(f"table slice currents: expected {expected} for a time-varying table; got "
                                  f"{self.slice_current_m_s.shape}{'' if self.slices is not None else ' on a stationary one'}")
-            if not np.all(np.abs(self.slice_current_m_s) <= _CURRENT_LIMIT_M_S):  # NaN fails too
-                raise TableError(f"table slice currents: expected finite currents within +-{_CURRENT_LIMIT_M_S} m/s"
-                                 f" (whole cm/s in 16 bits); got {self.slice_current_m_s.ravel()[:6].tolist()} ...")
+            out_of_range = _current_out_of_range(self.slice_current_m_s)
+            if out_of_range:
+                raise TableError(f"table slice currents: {out_of_range}")
+            if self.slice_current_m_s.size > 2 * MAX_CURRENT_PAIRS:
+                raise TableError(f"table slice currents: {self.n_slices} slices x {self.n_current_regions:,} regions"
+                                 f" exceed the limit of {MAX_CURRENT_PAIRS:,} pairs; a larger timing block makes fewer")
             self.slice_current_m_s.setflags(write=False)
         dx_m, dy_m = cell_size_m(self.lat_deg, self.dlon_deg, self.dlat_deg)
         bearings = bearings_deg(dx_m, dy_m)
@@ -548,8 +552,9 @@ class PolicyTable:
             )
         if regions:
             current_bytes = n_slices * regions * _CURRENT_BYTES
-            fields["slice_current_m_s"] = _unpack_current(raw[-current_bytes:], n_slices, regions)
-            raw = raw[:-current_bytes]
+            fields["slice_current_m_s"] = _unpack_current(memoryview(raw)[len(raw) - current_bytes:], n_slices, regions)
+        if "slice_current_m_s" in fields and _current_out_of_range(fields["slice_current_m_s"]):
+            raise TableError(f"{name}: slice currents: {_current_out_of_range(fields['slice_current_m_s'])}")
         water, actions = _unpack_payload(raw, shape, n_slices)
         if n_slices > 1 and not flags & FLAG_WHOLE_SLICES:
             actions = np.bitwise_xor.accumulate(actions, axis=0)  # each slice was stored as its change from the one before
@@ -611,6 +616,16 @@ _CURRENT_BYTES = 4  # per slice and region
 _CURRENT_LIMIT_M_S = 327.67
 
 
+def _current_out_of_range(current_m_s: NDArray[np.float64]) -> str:
+    """Empty, or what is wrong with the first slice current beyond 16 bits of cm/s (or not finite)."""
+    bad = ~(np.abs(current_m_s) <= _CURRENT_LIMIT_M_S)  # NaN is bad too
+    if not bad.any():
+        return ""
+    n, r, c = (int(x) for x in np.argwhere(bad)[0])
+    return (f"slice {n}, region {r}, {('east', 'north')[c]}: {float(current_m_s[n, r, c])!r} m/s; expected a finite current"
+            f" within +-{_CURRENT_LIMIT_M_S} m/s (whole cm/s in 16 bits)")
+
+
 def _pack_current(current_m_s: NDArray[np.float64]) -> bytes:
     """(T, R, 2) currents as whole cm/s: the first slice, then each slice less the one before, in int16
     arithmetic that wraps (a reader's running sum wraps back): hourly means change by a few cm/s, so
@@ -621,7 +636,7 @@ def _pack_current(current_m_s: NDArray[np.float64]) -> bytes:
     return step.astype("<i2").tobytes()  # int64 to int16 keeps the low 16 bits: the wrapped difference
 
 
-def _unpack_current(raw: bytes, n_slices: int, n_regions: int) -> NDArray[np.float64]:
+def _unpack_current(raw: bytes | memoryview, n_slices: int, n_regions: int) -> NDArray[np.float64]:
     """Inverse of ``_pack_current``: (T, R, 2) in m/s."""
     step = np.frombuffer(raw, dtype="<i2").reshape(n_slices, n_regions, 2)
     with np.errstate(over="ignore"):
@@ -641,13 +656,13 @@ def _pack_payload(water: NDArray[np.bool_], actions: NDArray[np.uint8]) -> bytes
     return mask.tobytes() + nibbles.astype(np.uint8).tobytes()
 
 
-def _unpack_payload(raw: bytes, cell_shape: tuple[int, int, int], n_slices: int = 1) -> tuple[NDArray[np.bool_], NDArray[np.uint8]]:
+def _unpack_payload(raw: bytes | memoryview, cell_shape: tuple[int, int, int], n_slices: int = 1) -> tuple[NDArray[np.bool_], NDArray[np.uint8]]:
     """Inverse of ``_pack_payload``: actions ``cell_shape + (8,)``, or ``(n_slices,) + ...`` when sliced."""
     n_cells = int(np.prod(cell_shape))
     n_mask = (n_cells + 7) // 8
     buf = np.frombuffer(raw, dtype=np.uint8)
     water = np.unpackbits(buf[:n_mask], bitorder="little")[:n_cells].astype(bool).reshape(cell_shape)
-    packed = buf[n_mask:].reshape(n_slices, -1)
+    packed = buf[n_mask:n_mask + n_slices * ((n_cells * N_HEADINGS + 1) // 2)].reshape(n_slices, -1)  # the currents follow
     actions = np.empty((n_slices, packed.shape[1] * 2), dtype=np.uint8)
     actions[:, 0::2] = packed & 0x0F
     actions[:, 1::2] = packed >> 4

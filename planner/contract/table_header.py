@@ -21,6 +21,9 @@ MAX_STATES = 1 << 31
 # ``time.current_cm_s`` of a table whose slice currents follow the actions in the payload (docs/policy-table.md):
 # compressed with them, they take a fifth of the header's JSON lists.
 CURRENT_IN_PAYLOAD = "payload"
+# Slice currents a table may carry (slices x regions): 64 MB in the payload, 256 MB read as numbers. A
+# block of 4 cells on a grid of 4 M states and 73 slices is 2.3 M pairs.
+MAX_CURRENT_PAIRS = 1 << 24
 
 
 def block_shape(ny: int, nx: int, block_cells: int | None) -> tuple[int, int]:
@@ -97,6 +100,9 @@ def header_fields(header: Any) -> dict[str, Any]:
         if "current_cm_s" in time_part:  # optional; older readers never saw it
             rows, cols = block_shape(ny, nx, fields.get("current_block_cells"))
             regions = len(depths) * rows * cols
+            if len(times) * regions > MAX_CURRENT_PAIRS:  # checked before the payload is read
+                raise TableError(f"time.current_cm_s: {len(times)} slices x {regions:,} regions exceed the limit of"
+                                 f" {MAX_CURRENT_PAIRS:,} pairs")
             if time_part["current_cm_s"] == CURRENT_IN_PAYLOAD:  # the reader takes them from the payload
                 fields["payload_current_regions"] = regions
             else:  # JSON lists, as the first tables with currents were written
@@ -133,7 +139,11 @@ def _slice_current(value: Any, n_slices: int, n_regions: int) -> NDArray[np.floa
         for l, pair in enumerate(when):
             if not isinstance(pair, list) or len(pair) != 2:
                 raise TableError(f"{key}[{n}][{l}]: expected [east, north] in cm/s; got {repr(pair)[:80]}")
-            out[n, l] = [_int(pair[0], f"{key}[{n}][{l}][0]"), _int(pair[1], f"{key}[{n}][{l}][1]")]
+            for c in range(2):
+                cm_s = _int(pair[c], f"{key}[{n}][{l}][{c}]")
+                if abs(cm_s) > 32767:  # what the payload's 16 bits hold, and what a table may carry
+                    raise TableError(f"{key}[{n}][{l}][{c}]: expected whole cm/s within +-32767; got {cm_s}"[:200])
+                out[n, l, c] = cm_s
     return out / 100.0
 
 

@@ -258,6 +258,10 @@ def test_a_table_that_numbers_its_regions_otherwise_starts_a_record_of_its_own(t
                                                          tidal.slice_current_m_s * 0.5).to_bytes())
     kept, _ = tide_watch.measured(w, per_layer, vehicle, 100.0, T0 + 100.0, 0.0, 0.1, fresh=True, running=True)
     assert kept.clock.record.observations == record.observations  # layers numbered alike: the record goes on
+    whole = PolicyTable.from_bytes(tidal.with_slices(tidal.slice_times, tidal.slices, tidal.slice_current_m_s * 0.5,
+                                                     block_cells=1000).to_bytes())  # a block as large as the grid
+    kept, _ = tide_watch.measured(w, whole, vehicle, 100.0, T0 + 100.0, 0.0, 0.1, fresh=True, running=True)
+    assert kept.clock.record.observations == record.observations  # one block a layer: a layer
     current = np.zeros((HOURS, tidal.n_layers * (-(-tidal.ny // 3)) * (-(-tidal.nx // 3)), 2))
     blocked = PolicyTable.from_bytes(tidal.with_slices(tidal.slice_times, tidal.slices, current, block_cells=3).to_bytes())
     fresh, _ = tide_watch.measured(w, blocked, vehicle, 100.0, T0 + 100.0, 0.0, 0.1, fresh=True, running=True)

@@ -284,17 +284,9 @@ def test_a_land_cell_with_an_action_in_a_later_slice_is_refused(demo_plan, timed
 
 def test_the_first_version_2_files_with_each_slice_as_its_change_from_the_one_before_still_read(timed):
     """Without flag 0x0004 a later slice is its XOR with the slice before (the first version 2 files)."""
-    assert timed.slices is not None
-    n_mask = (timed.water.size + 7) // 8
-    per_slice = timed.slices[0].size // 2
-
-    def xor_deltas(p: bytes) -> bytes:
-        packed = np.frombuffer(p[n_mask:], dtype=np.uint8).reshape(3, per_slice).copy()
-        packed[1:] ^= packed[:-1].copy()  # nibble by nibble, as byte by byte
-        return p[:n_mask] + packed.tobytes()
-
     for compress in (True, False):
-        old = _rewritten(timed.to_bytes(compress=compress), payload=xor_deltas, new_flags=lambda f: f & ~0x0004)
+        old = _rewritten(timed.to_bytes(compress=compress), payload=lambda p: _xor_slices(p, timed),
+                         new_flags=lambda f: f & ~0x0004)
         back = PolicyTable.from_bytes(old)
         assert back.slices is not None and np.array_equal(back.slices, timed.slices)
     # Read as whole slices, the deltas would be other actions (land's UNREACHABLE XOR itself is DRIFT):
@@ -366,15 +358,44 @@ def test_slice_currents_at_the_ends_of_16_bits_round_trip_and_beyond_them_are_re
     back = PolicyTable.from_bytes(timed.with_slices(HOURS, timed.slices, current).to_bytes())
     assert np.array_equal(back.slice_current_m_s, current)
     current[2, 0, 1] = 327.68
-    with pytest.raises(TableError, match=re.escape("within +-327.67 m/s")):
+    with pytest.raises(TableError, match=re.escape("slice 2, region 0, north: 327.68 m/s; expected a finite current within"
+                                                   " +-327.67 m/s")):
         timed.with_slices(HOURS, timed.slices, current)
     current[2, 0, 1] = np.nan
-    with pytest.raises(TableError, match=re.escape("within +-327.67 m/s")):
+    with pytest.raises(TableError, match=re.escape("slice 2, region 0, north: nan m/s")):
         timed.with_slices(HOURS, timed.slices, current)
+    # -32768 cm/s fits the payload's 16 bits but no table carries it: the file is refused by name.
+    good = timed.with_slices(HOURS, timed.slices, np.zeros((3, L, 2))).to_bytes()
+    low = _rewritten(good, payload=lambda p: p[:-3 * L * 4] + (-32768).to_bytes(2, "little", signed=True) + p[-3 * L * 4 + 2:])
+    with pytest.raises(TableError, match=re.escape("t.lrpt: slice currents: slice 0, region 0, east: -327.68 m/s")):
+        PolicyTable.from_bytes(low, name="t.lrpt")
+    with pytest.raises(TableError, match=re.escape("time.current_cm_s[1][0][1]: expected whole cm/s within +-32767;")):
+        PolicyTable.from_bytes(_rewritten(_header_currents(timed.with_slices(HOURS, timed.slices, np.zeros((3, L, 2)))),
+                                          header=lambda h: _set_current(h, 1, 0, 1, 10 ** 400)))
+
+
+def test_slice_currents_beyond_their_limit_are_refused_before_the_payload_is_read(timed):
+    from planner.contract.table_header import MAX_CURRENT_PAIRS
+
+    table = timed.with_slices(HOURS, timed.slices, np.zeros((3, timed.n_layers * timed.ny * timed.nx, 2)), block_cells=1)
+
+    def header(h):  # type: ignore[no-untyped-def]
+        h["grid"]["nx"] = h["grid"]["ny"] = 2400  # 4 layers of 2400 x 2400 one-cell blocks in 3 slices: 69 M pairs
+        return h
+
+    assert 3 * 4 * 2400 * 2400 > MAX_CURRENT_PAIRS
+    with pytest.raises(TableError, match=re.escape(f"time.current_cm_s: 3 slices x 23,040,000 regions exceed the limit of"
+                                                   f" {MAX_CURRENT_PAIRS:,} pairs")):
+        PolicyTable.from_bytes(_rewritten(table.to_bytes(), header=header))
+
+
+def _set_current(h, n, r, c, value):  # type: ignore[no-untyped-def]
+    h["time"]["current_cm_s"][n][r][c] = value
+    return h
 
 
 def test_a_table_with_its_slice_currents_in_the_header_still_reads(timed):
-    """The first tables with slice currents carried them as JSON lists in the header."""
+    """The first tables with slice currents carried them as JSON lists in the header (and their slices as XOR changes)."""
     L = timed.n_layers
     current = np.linspace(-0.834, 0.917, 3 * L * 2).reshape(3, L, 2)
     table = timed.with_slices(HOURS, timed.slices, current)
@@ -393,15 +414,25 @@ def _header_len(table: PolicyTable, data: bytes | None = None) -> int:
 
 
 def _header_currents(table: PolicyTable) -> bytes:
-    """``table``'s file as the first tables with slice currents were written: JSON lists in the header."""
-    assert table.slice_current_m_s is not None
+    """``table``'s file as the first tables with slice currents were written: JSON lists in the header, and
+    each slice after the first as its XOR with the slice before (no flag 0x0004)."""
+    assert table.slice_current_m_s is not None and table.slices is not None
     cm_s = np.round(table.slice_current_m_s * 100).astype(int).tolist()
 
     def header(h):  # type: ignore[no-untyped-def]
         h["time"]["current_cm_s"] = cm_s
         return h
 
-    return _rewritten(table.to_bytes(), header=header, payload=lambda p: p[:-table.slice_current_m_s.size * 2])
+    return _rewritten(table.to_bytes(), header=header, new_flags=lambda f: f & ~0x0004,
+                      payload=lambda p: _xor_slices(p[:-table.slice_current_m_s.size * 2], table))
+
+
+def _xor_slices(p: bytes, table: PolicyTable) -> bytes:
+    """A payload of whole slices (no currents after them) as the first version 2 files stored it."""
+    n_mask = (table.water.size + 7) // 8
+    packed = np.frombuffer(p[n_mask:], dtype=np.uint8).reshape(table.n_slices, -1).copy()
+    packed[1:] ^= packed[:-1].copy()  # nibble by nibble, as byte by byte
+    return p[:n_mask] + packed.tobytes()
 
 
 def test_slice_currents_per_block_of_cells_read_back_and_say_which_block_a_cell_is_in(timed):

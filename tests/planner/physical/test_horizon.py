@@ -231,6 +231,7 @@ def test_with_timing_correction_the_table_carries_each_slices_mean_current(gyre_
     result = make_plan(gyre_request(gyre_file, horizon_h=2.0, timing_correction=True, timing_block_cells=1000))
     table = PolicyTable.from_bytes(result.table.to_bytes())
     assert table.slice_current_m_s is not None and table.slice_current_m_s.shape == (3, 2, 2)  # a block a layer
+    assert table.current_block_cells is None  # written as a table of one mean per layer
     assert np.array_equal(table.slices, plain.slices)  # the plan is the same; only the lookup may shift
     # Slice 0's is the mean of the planning grid's water currents, to the cm/s.
     assert np.allclose(table.slice_current_m_s[0], region_mean_current(result.u_m_s, result.v_m_s), atol=0.005)
