@@ -428,11 +428,31 @@ def _header_currents(table: PolicyTable) -> bytes:
 
 
 def _xor_slices(p: bytes, table: PolicyTable) -> bytes:
-    """A payload of whole slices (no currents after them) as the first version 2 files stored it."""
+    """``table``'s payload (``p``: its water mask, then its actions; no currents) as the first version 2
+    files stored it: slice after slice, each after the first as its XOR with the slice before."""
+    assert table.slices is not None
     n_mask = (table.water.size + 7) // 8
-    packed = np.frombuffer(p[n_mask:], dtype=np.uint8).reshape(table.n_slices, -1).copy()
+    assert len(p) == n_mask + table.slices.size // 2
+    flat = table.slices.reshape(table.n_slices, -1)
+    packed = (flat[:, 0::2] | (flat[:, 1::2] << 4)).astype(np.uint8)
     packed[1:] ^= packed[:-1].copy()  # nibble by nibble, as byte by byte
     return p[:n_mask] + packed.tobytes()
+
+
+def test_a_time_varying_payload_holds_each_cells_actions_slice_after_slice(timed):
+    """Flag bit 2, as docs/policy-table.md lays it out: per cell (l, j, i), its 8 actions in slice 0, then slice 1, ..."""
+    assert timed.slices is not None
+    data = timed.to_bytes(compress=False)
+    n_mask = (timed.water.size + 7) // 8
+    payload = data[24 + int.from_bytes(data[12:16], "little"):-4]
+    nibbles = np.empty(2 * (len(payload) - n_mask), dtype=np.uint8)
+    nibbles[0::2] = np.frombuffer(payload[n_mask:], dtype=np.uint8) & 0x0F
+    nibbles[1::2] = np.frombuffer(payload[n_mask:], dtype=np.uint8) >> 4
+    cells = nibbles.reshape(timed.n_layers, timed.ny, timed.nx, timed.n_slices, 8)
+    l, j, i = 1, 3, 4
+    for n in range(timed.n_slices):
+        assert cells[l, j, i, n].tolist() == timed.slices[n, l, j, i].tolist()
+    assert np.array_equal(np.moveaxis(cells, 3, 0), timed.slices)
 
 
 def test_slice_currents_per_block_of_cells_read_back_and_say_which_block_a_cell_is_in(timed):
