@@ -43,7 +43,7 @@ FLAG_XZ = 0x0002
 # actions mostly repeat from one hour to the next, which xz codes as a short match four bytes back:
 # on the demo's 73 hourly slices the payload is 38 % smaller than with the XOR changes the first
 # version 2 files carry, which readers still take (without this flag).
-FLAG_WHOLE_SLICES = 0x0004
+FLAG_BY_CELL = 0x0004
 _PREAMBLE = struct.Struct("<8sHHI")  # magic, version, flags, header length
 _PAYLOAD = struct.Struct("<II")  # stored payload length, raw payload length
 _CRC = struct.Struct("<I")
@@ -458,7 +458,7 @@ class PolicyTable:
             version, flags = FORMAT_VERSION, FLAG_ZLIB if compress else 0
             stored = zlib.compress(raw, 9) if compress else raw
         else:
-            version, flags = TIMED_VERSION, FLAG_WHOLE_SLICES | (FLAG_XZ if compress else 0)
+            version, flags = TIMED_VERSION, FLAG_BY_CELL | (FLAG_XZ if compress else 0)
             stored = (lzma.compress(raw, format=lzma.FORMAT_XZ, check=lzma.CHECK_CRC32, preset=9 | lzma.PRESET_EXTREME)
                       if compress else raw)
         body = b"".join([_PREAMBLE.pack(MAGIC, version, flags, len(header)), header, _PAYLOAD.pack(len(stored), len(raw)),
@@ -477,12 +477,12 @@ class PolicyTable:
         if version not in (FORMAT_VERSION, TIMED_VERSION):
             raise TableError(f"{name}: format version {version} is not supported; this reader reads versions "
                              f"{FORMAT_VERSION} and {TIMED_VERSION}")
-        if flags & ~(FLAG_ZLIB | FLAG_XZ | FLAG_WHOLE_SLICES):
+        if flags & ~(FLAG_ZLIB | FLAG_XZ | FLAG_BY_CELL):
             raise TableError(f"{name}: unknown flags 0x{flags:04x}")
         if flags & FLAG_XZ and (flags & FLAG_ZLIB or version != TIMED_VERSION):
             raise TableError(f"{name}: flags 0x{flags:04x}: an xz payload (0x0002) is version 2's alone, and never with zlib (0x0001)")
-        if flags & FLAG_WHOLE_SLICES and version != TIMED_VERSION:
-            raise TableError(f"{name}: flags 0x{flags:04x}: whole slices (0x0004) are version 2's alone")
+        if flags & FLAG_BY_CELL and version != TIMED_VERSION:
+            raise TableError(f"{name}: flags 0x{flags:04x}: actions by cell (0x0004) are version 2's alone")
         pos = _PREAMBLE.size + header_len
         if pos + _PAYLOAD.size + _CRC.size > len(data):
             raise TableError(f"{name}: truncated: the header says {header_len} header bytes but the file has {len(data)} bytes")
@@ -557,7 +557,7 @@ class PolicyTable:
         if "slice_current_m_s" in fields and _current_out_of_range(fields["slice_current_m_s"]):
             raise TableError(f"{name}: slice currents: {_current_out_of_range(fields['slice_current_m_s'])}")
         water, actions = _unpack_payload(raw, shape, n_slices)
-        if n_slices > 1 and flags & FLAG_WHOLE_SLICES:  # the same nibbles, in the order cell, slice, heading
+        if n_slices > 1 and flags & FLAG_BY_CELL:  # the same nibbles, in the order cell, slice, heading
             actions = np.ascontiguousarray(np.moveaxis(actions.reshape(shape + (n_slices, N_HEADINGS)), -2, 0))
         elif n_slices > 1:
             actions = np.bitwise_xor.accumulate(actions, axis=0)  # each slice was stored as its change from the one before
