@@ -289,8 +289,7 @@ def test_the_first_version_2_files_with_each_slice_as_its_change_from_the_one_be
                          new_flags=lambda f: f & ~0x0004)
         back = PolicyTable.from_bytes(old)
         assert back.slices is not None and np.array_equal(back.slices, timed.slices)
-    # Read as actions by cell, the XOR file would be other actions (land's UNREACHABLE XOR itself is DRIFT):
-    # the flag is what tells the two apart.
+    # Read as actions by cell, the XOR file would put other actions on land: the flag is what tells the two apart.
     with pytest.raises(TableError, match="land cells must carry UNREACHABLE"):
         PolicyTable.from_bytes(_rewritten(old, new_flags=lambda f: f | 0x0004))
     with pytest.raises(TableError, match=re.escape("actions by cell (0x0004) are version 2's alone")):
