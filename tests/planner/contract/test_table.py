@@ -210,7 +210,7 @@ def test_a_time_varying_table_round_trips_as_version_2(timed, compress):
     assert np.array_equal(back.actions, timed.slices[0]) and np.array_equal(back.water, timed.water)
     assert back.header()["time"] == {"slices_utc": list(HOURS), "lookup": "nearest"}
     assert back.to_bytes(compress=compress) == data
-    assert int.from_bytes(data[10:12], "little") == (0x0006 if compress else 0x0004)  # xz; whole slices
+    assert int.from_bytes(data[10:12], "little") == (0x000A if compress else 0x0008)  # xz; by cell
     assert back.slice_unix_s == (T0, T0 + 3600.0, T0 + 7200.0)
     for n in range(3):  # each slice is a stationary table with the file's identity
         view = back.slice_table(n)
@@ -283,17 +283,17 @@ def test_a_land_cell_with_an_action_in_a_later_slice_is_refused(demo_plan, timed
 
 
 def test_the_first_version_2_files_with_each_slice_as_its_change_from_the_one_before_still_read(timed):
-    """Without flag 0x0004 a later slice is its XOR with the slice before (the first version 2 files)."""
+    """Without flag 0x0008 a later slice is its XOR with the slice before (the first version 2 files)."""
     for compress in (True, False):
         old = _rewritten(timed.to_bytes(compress=compress), payload=lambda p: _xor_slices(p, timed),
-                         new_flags=lambda f: f & ~0x0004)
+                         new_flags=lambda f: f & ~0x0008)
         back = PolicyTable.from_bytes(old)
         assert back.slices is not None and np.array_equal(back.slices, timed.slices)
     # Read as actions by cell, the XOR file would put other actions on land: the flag is what tells the two apart.
     with pytest.raises(TableError, match="land cells must carry UNREACHABLE"):
-        PolicyTable.from_bytes(_rewritten(old, new_flags=lambda f: f | 0x0004))
-    with pytest.raises(TableError, match=re.escape("actions by cell (0x0004) are version 2's alone")):
-        PolicyTable.from_bytes(_rewritten(timed.slice_table(0).to_bytes(), new_flags=lambda f: f | 0x0004))
+        PolicyTable.from_bytes(_rewritten(old, new_flags=lambda f: f | 0x0008))
+    with pytest.raises(TableError, match=re.escape("actions by cell (0x0008) are version 2's alone")):
+        PolicyTable.from_bytes(_rewritten(timed.slice_table(0).to_bytes(), new_flags=lambda f: f | 0x0008))
 
 
 def test_slices_that_barely_change_cost_little_more_than_one(demo_plan):
@@ -414,7 +414,7 @@ def _header_len(table: PolicyTable, data: bytes | None = None) -> int:
 
 def _header_currents(table: PolicyTable) -> bytes:
     """``table``'s file as the first tables with slice currents were written: JSON lists in the header, and
-    each slice after the first as its XOR with the slice before (no flag 0x0004)."""
+    each slice after the first as its XOR with the slice before (no flag 0x0008)."""
     assert table.slice_current_m_s is not None and table.slices is not None
     cm_s = np.round(table.slice_current_m_s * 100).astype(int).tolist()
 
@@ -422,7 +422,7 @@ def _header_currents(table: PolicyTable) -> bytes:
         h["time"]["current_cm_s"] = cm_s
         return h
 
-    return _rewritten(table.to_bytes(), header=header, new_flags=lambda f: f & ~0x0004,
+    return _rewritten(table.to_bytes(), header=header, new_flags=lambda f: f & ~0x0008,
                       payload=lambda p: _xor_slices(p[:-table.slice_current_m_s.size * 2], table))
 
 
@@ -439,7 +439,7 @@ def _xor_slices(p: bytes, table: PolicyTable) -> bytes:
 
 
 def test_a_time_varying_payload_holds_each_cells_actions_slice_after_slice(timed):
-    """Flag bit 2, as docs/policy-table.md lays it out: per cell (l, j, i), its 8 actions in slice 0, then slice 1, ..."""
+    """Flag bit 3, as docs/policy-table.md lays it out: per cell (l, j, i), its 8 actions in slice 0, then slice 1, ..."""
     assert timed.slices is not None
     data = timed.to_bytes(compress=False)
     n_mask = (timed.water.size + 7) // 8
