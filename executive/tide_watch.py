@@ -75,10 +75,9 @@ def commanded(watch: TideWatch, cmd: Command, now_s: float) -> TideWatch:
 def region_layout(table: PolicyTable) -> tuple[str | int | float, ...]:
     """What a region number means in ``table`` (``PolicyTable.current_region``): its layers, and with blocks
     their size and the grid they cut. Two tables with the same layout number the same places alike."""
-    k = table.current_block_cells
-    if k is None or table.current_blocks() == (1, 1):  # no block size, or one as large as the grid
+    if table.current_block_cells is None:  # a table keeps no block as large as the grid (kept_block_cells)
         return ("layers", *table.depth_m)
-    return ("blocks", k, table.ny, table.nx, table.lon0_deg, table.lat0_deg, table.dlon_deg,
+    return ("blocks", table.current_block_cells, table.ny, table.nx, table.lon0_deg, table.lat0_deg, table.dlon_deg,
             table.dlat_deg, *table.depth_m)
 
 

@@ -481,8 +481,7 @@ def _plan_horizon(request: PlanRequest, forecast: Forecast, index: int, timings:
                     f"{len(steps)} time slices over {(forecast.time_s[steps[-1]] - forecast.time_s[steps[0]]) / 3600:g} h")
 
     sampled = [0]  # slices sampled so far, whatever order the solver asks for them in
-    # A block as large as the grid is one per layer: written as the per-layer table it is, without a block size.
-    block = settings.timing_block_cells if settings.timing_block_cells < max(grid.ny, grid.nx) else None
+    block = settings.timing_block_cells
     current: list[NDArray[np.float64]] = [np.zeros(0)] * len(steps)  # each slice's mean current per region, for the tide's timing
 
     def model_at(n: int) -> PhysicalModel:

@@ -85,8 +85,7 @@ def model_lines(result: PlanResult) -> list[str]:
                      f" last, its stationary plan; {sum(h.sweeps):,} Gauss-Seidel sweeps over the earlier slices")
         if result.table.slice_current_m_s is not None:
             k = result.table.current_block_cells
-            per = ("per layer" if k is None or result.table.n_current_regions == result.table.n_layers
-                   else f"per block of {k} x {k} cells ({result.table.n_current_regions} blocks)")
+            per = "per layer" if k is None else f"per block of {k} x {k} cells ({result.table.n_current_regions} blocks)"
             lines.append(f"timing     each slice's mean current {per} carried: the vehicle fits the tide's timing to the"
                          " current it meets and looks its slices up that much earlier or later (docs/time-varying.md)")
     elif s.criterion == "expected":

@@ -29,7 +29,7 @@ from planner.contract.atomic import write_atomic
 from planner.contract.errors import TableError
 from planner.contract.headings import N_HEADINGS, bearings_deg, cell_size_m, courses_deg
 from planner.contract.table_header import (CURRENT_IN_PAYLOAD, MAX_CURRENT_PAIRS, MAX_STATES, block_shape, header_fields,
-                                           slice_unix_s)
+                                           kept_block_cells, slice_unix_s)
 
 MAGIC = b"LRAUVPT\x00"
 FORMAT_VERSION = 1  # a stationary plan; its files are what they always were
@@ -225,7 +225,8 @@ class PolicyTable:
         slice_unix_s(times_utc, "slice times")  # ISO 8601 UTC, increasing
         current = None if current_m_s is None else np.round(np.asarray(current_m_s, dtype=np.float64) * 100.0) / 100.0
         return replace(self, actions=np.ascontiguousarray(stack[0]), slices=stack, slice_times=tuple(times_utc),
-                       slice_current_m_s=current, current_block_cells=None if current is None else block_cells)
+                       slice_current_m_s=current,
+                       current_block_cells=None if current is None else kept_block_cells(self.ny, self.nx, block_cells))
 
     def current_blocks(self) -> tuple[int, int]:
         """(rows, columns) of current regions in a layer: blocks of ``current_block_cells``, or the whole layer."""
@@ -554,8 +555,9 @@ class PolicyTable:
         if regions:
             current_bytes = n_slices * regions * _CURRENT_BYTES
             fields["slice_current_m_s"] = _unpack_current(memoryview(raw)[len(raw) - current_bytes:], n_slices, regions)
-        if "slice_current_m_s" in fields and _current_out_of_range(fields["slice_current_m_s"]):
-            raise TableError(f"{name}: slice currents: {_current_out_of_range(fields['slice_current_m_s'])}")
+        out_of_range = _current_out_of_range(fields["slice_current_m_s"]) if "slice_current_m_s" in fields else ""
+        if out_of_range:
+            raise TableError(f"{name}: slice currents: {out_of_range}")
         water, actions = _unpack_payload(raw, shape, n_slices)
         if n_slices > 1 and flags & FLAG_BY_CELL:  # the same nibbles, in the order cell, slice, heading
             actions = np.ascontiguousarray(np.moveaxis(actions.reshape(shape + (n_slices, N_HEADINGS)), -2, 0))
@@ -671,7 +673,7 @@ def _unpack_payload(raw: bytes | memoryview, cell_shape: tuple[int, int, int], n
     n_mask = (n_cells + 7) // 8
     buf = np.frombuffer(raw, dtype=np.uint8)
     water = np.unpackbits(buf[:n_mask], bitorder="little")[:n_cells].astype(bool).reshape(cell_shape)
-    packed = buf[n_mask:n_mask + n_slices * ((n_cells * N_HEADINGS + 1) // 2)].reshape(n_slices, -1)  # the currents follow
+    packed = buf[n_mask:_payload_len(n_cells, n_slices)].reshape(n_slices, -1)  # slice currents may follow
     actions = np.empty((n_slices, packed.shape[1] * 2), dtype=np.uint8)
     actions[:, 0::2] = packed & 0x0F
     actions[:, 1::2] = packed >> 4

@@ -32,6 +32,12 @@ def block_shape(ny: int, nx: int, block_cells: int | None) -> tuple[int, int]:
     return (1, 1) if block_cells is None else (-(-ny // block_cells), -(-nx // block_cells))
 
 
+def kept_block_cells(ny: int, nx: int, block_cells: int | None) -> int | None:
+    """``block_cells`` as a table keeps it: None where one block covers a whole layer, whose region is then
+    the layer itself, so such a table is written, read and fitted as one of a mean per layer."""
+    return None if block_cells is None or block_shape(ny, nx, block_cells) == (1, 1) else block_cells
+
+
 def header_fields(header: Any) -> dict[str, Any]:
     """The PolicyTable fields of a parsed JSON header; TableError naming the key path and the value.
 
@@ -96,7 +102,7 @@ def header_fields(header: Any) -> dict[str, Any]:
             if k < 1 or "current_cm_s" not in time_part:  # a block larger than the grid is one block a layer
                 raise TableError(f"time.current_block_cells: expected a whole number of cells >= 1, with"
                                  f" time.current_cm_s; got {k}")
-            fields["current_block_cells"] = k
+            fields["current_block_cells"] = kept_block_cells(ny, nx, k)
         if "current_cm_s" in time_part:  # optional; older readers never saw it
             rows, cols = block_shape(ny, nx, fields.get("current_block_cells"))
             regions = len(depths) * rows * cols
